@@ -1,0 +1,43 @@
+//! The weak calibration DEAR estimates: the parameters of the RGB→ToF flow model
+//! `W(p) = (t_x / z(p) + c_x, t_y / z(p) + c_y)`.
+//!
+//! Units: `t_x, t_y` in pixel·metres (the focal length is absorbed into the baseline, as in the
+//! paper), `c_x, c_y` in pixels, `z` in metres. A pixel `p` of the RGB image sees the ToF pixel
+//! `p + W(p)`.
+
+use serde::{Deserialize, Serialize};
+
+/// Parameters of the depth-dependent flow between the RGB and the ToF image.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Calibration {
+    /// Horizontal baseline times focal length, px·m.
+    pub tx: f32,
+    /// Vertical baseline times focal length, px·m.
+    pub ty: f32,
+    /// Horizontal principal-point offset, px.
+    pub cx: f32,
+    /// Vertical principal-point offset, px.
+    pub cy: f32,
+}
+
+impl Calibration {
+    /// The identity: no flow at any depth.
+    pub const IDENTITY: Calibration = Calibration {
+        tx: 0.0,
+        ty: 0.0,
+        cx: 0.0,
+        cy: 0.0,
+    };
+
+    /// The flow `(u, v)` this calibration predicts for a point at depth `z` metres.
+    /// Returns `None` for a non-positive or non-finite depth (no valid flow there).
+    #[inline]
+    pub fn flow_at(&self, z: f32) -> Option<(f32, f32)> {
+        if z > 0.0 && z.is_finite() {
+            Some((self.tx / z + self.cx, self.ty / z + self.cy))
+        } else {
+            None
+        }
+    }
+}

@@ -1,0 +1,66 @@
+//! In-memory images of one RGB-D frame, shared by every stage of the pipeline.
+//!
+//! Layouts (row-major, `(row, column)` indexing as ndarray does):
+//! - depth maps: `Array2<f32>` `(H, W)`, metres, `0.0` = invalid;
+//! - amplitude: `Array2<f32>` `(H, W)`, raw sensor units (the 16-bit PNG value as f32);
+//! - RGB: `Array3<u8>` `(H, W, 3)`, 8-bit sRGB;
+//! - masks: `Array2<bool>` `(H, W)`, `true` = valid;
+//! - flow: [`Flow`], two `(H, W)` planes in pixels.
+
+use ndarray::{Array2, Array3};
+
+use crate::calibration::Calibration;
+
+/// A dense 2-D flow on a pixel grid: pixel `p` of the grid maps to `p + (u(p), v(p))`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Flow {
+    /// Horizontal component (columns), px.
+    pub u: Array2<f32>,
+    /// Vertical component (rows), px.
+    pub v: Array2<f32>,
+}
+
+impl Flow {
+    /// A zero flow of the given `(height, width)`.
+    pub fn zeros(height: usize, width: usize) -> Self {
+        Flow {
+            u: Array2::zeros((height, width)),
+            v: Array2::zeros((height, width)),
+        }
+    }
+
+    /// `(height, width)`.
+    pub fn dim(&self) -> (usize, usize) {
+        self.u.dim()
+    }
+}
+
+/// One frame of a ToF RGB-D module as recorded or simulated, plus optional ground truth.
+#[derive(Debug, Clone)]
+pub struct RgbdFrame {
+    /// Frame number within its capture.
+    pub index: u64,
+    /// Capture time, nanoseconds since the start of the capture (or the epoch for live sources).
+    pub timestamp_ns: u64,
+    /// RGB image `(H, W, 3)`.
+    pub rgb: Array3<u8>,
+    /// Raw ToF amplitude `(H, W)`.
+    pub amplitude: Array2<f32>,
+    /// ToF depth `(H, W)` in metres, `0` = invalid, on the (weakly calibrated) RGB grid.
+    pub depth: Array2<f32>,
+    /// Optional ground-truth depth in the RGB view, metres.
+    pub gt_depth: Option<Array2<f32>>,
+    /// Optional confidence / validity mask.
+    pub mask: Option<Array2<bool>>,
+    /// Optional ground-truth flow RGB → ToF.
+    pub flow: Option<Flow>,
+    /// The true misalignment parameters of this frame, when known.
+    pub perturbation: Option<Calibration>,
+}
+
+impl RgbdFrame {
+    /// `(height, width)`.
+    pub fn dim(&self) -> (usize, usize) {
+        self.depth.dim()
+    }
+}

@@ -1,0 +1,16 @@
+//! `dear-pipeline`: the DEAR algorithm, independent of how frames are captured or published.
+//!
+//! - [`calibration`]: the weak-calibration flow model `W = t / z + c`;
+//! - [`frame`]: in-memory images of one RGB-D frame;
+//! - [`capture`]: the capture-directory format (read, validate, write);
+//! - [`geometry`]: warping, least-squares calibration, depth↔flow, forward splatting;
+//! - [`filter`]: the classical edge-aware refinement baseline.
+
+pub mod calibration;
+pub mod capture;
+pub mod filter;
+pub mod frame;
+pub mod geometry;
+
+pub use calibration::Calibration;
+pub use frame::{Flow, RgbdFrame};

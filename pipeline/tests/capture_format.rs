@@ -1,0 +1,191 @@
+//! The capture-directory codecs: a round trip keeps every value, and each kind of damage is
+//! reported with the name of the damaged file.
+
+use std::fs;
+
+use dear_pipeline::capture::{
+    png, CaptureDir, CaptureError, CaptureManifest, CaptureWriter, Intrinsics,
+};
+use dear_pipeline::{Calibration, Flow, RgbdFrame};
+use ndarray::{Array2, Array3};
+
+const W: usize = 8;
+const H: usize = 6;
+
+fn frame(index: u64) -> RgbdFrame {
+    let rgb = Array3::from_shape_fn((H, W, 3), |(r, c, k)| {
+        (r * 40 + c * 7 + k * 3 + index as usize) as u8
+    });
+    let depth = Array2::from_shape_fn((H, W), |(r, c)| {
+        if r == 0 && c == 0 {
+            0.0
+        } else {
+            0.5 + 0.001 * (r * W + c) as f32
+        }
+    });
+    let flow = Flow {
+        u: Array2::from_shape_fn((H, W), |(r, c)| r as f32 * 0.25 - c as f32),
+        v: Array2::from_shape_fn((H, W), |(r, c)| -(r as f32) + 0.5 * c as f32),
+    };
+    RgbdFrame {
+        index,
+        timestamp_ns: index * 33_333_333,
+        rgb,
+        amplitude: Array2::from_shape_fn((H, W), |(r, c)| (r * 1000 + c) as f32),
+        depth: depth.clone(),
+        gt_depth: Some(depth.mapv(|z| z + 0.01)),
+        mask: Some(Array2::from_shape_fn((H, W), |(r, c)| (r + c) % 3 != 0)),
+        flow: Some(flow),
+        perturbation: Some(Calibration {
+            tx: 3.0,
+            ty: -1.0,
+            cx: 2.5,
+            cy: 0.5,
+        }),
+    }
+}
+
+fn write_capture(dir: &std::path::Path, frames: u64) {
+    let manifest = CaptureManifest::new(
+        W as u32,
+        H as u32,
+        Intrinsics::from_hfov(W as u32, H as u32, 60.0),
+    );
+    let mut writer = CaptureWriter::create(dir, manifest).unwrap();
+    for i in 0..frames {
+        writer.write_frame(&frame(i)).unwrap();
+    }
+    writer.finish().unwrap();
+}
+
+#[test]
+fn round_trip_keeps_every_value() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("cap");
+    write_capture(&dir, 3);
+    let cap = CaptureDir::open(&dir).unwrap();
+    assert_eq!(cap.len(), 3);
+    assert!(cap.has_ground_truth());
+    let got = cap.read_frame(2).unwrap();
+    let want = frame(2);
+    assert_eq!(got.index, 2);
+    assert_eq!(got.timestamp_ns, want.timestamp_ns);
+    assert_eq!(got.rgb, want.rgb);
+    assert_eq!(got.amplitude, want.amplitude);
+    assert_eq!(got.mask, want.mask);
+    assert_eq!(got.flow, want.flow);
+    assert_eq!(got.perturbation, want.perturbation);
+    // Depth is quantised to millimetres on disk.
+    for (a, b) in got.depth.iter().zip(want.depth.iter()) {
+        assert!((a - b).abs() <= 0.0005 + 1e-6, "{a} vs {b}");
+    }
+    assert_eq!(got.depth[[0, 0]], 0.0, "invalid depth stays invalid");
+    let gt = got.gt_depth.unwrap();
+    assert!((gt[[1, 1]] - want.gt_depth.unwrap()[[1, 1]]).abs() <= 0.0005 + 1e-6);
+}
+
+fn expect_err_naming(result: Result<RgbdFrame, CaptureError>, file: &std::path::Path, what: &str) {
+    let err = result.expect_err("damaged frame must be an error");
+    assert_eq!(err.path(), file, "error names the damaged file: {err}");
+    let text = err.to_string();
+    assert!(
+        text.contains(&*file.to_string_lossy()),
+        "message names the file: {text}"
+    );
+    assert!(
+        text.contains(what),
+        "message says what is wrong ({what}): {text}"
+    );
+}
+
+#[test]
+fn damaged_frames_are_reported_by_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("cap");
+    write_capture(&dir, 5);
+    let cap = CaptureDir::open(&dir).unwrap();
+
+    // Missing file.
+    fs::remove_file(cap.frame_paths(0).amplitude).unwrap();
+    expect_err_naming(cap.read_frame(0), &cap.frame_paths(0).amplitude, "missing");
+
+    // Truncated PNG.
+    let rgb = cap.frame_paths(1).rgb;
+    let bytes = fs::read(&rgb).unwrap();
+    fs::write(&rgb, &bytes[..bytes.len() / 2]).unwrap();
+    expect_err_naming(cap.read_frame(1), &rgb, "cannot decode");
+
+    // Wrong bit depth: an 8-bit depth image.
+    let depth = cap.frame_paths(2).depth;
+    png::write_mask(&depth, Array2::from_elem((H, W), true).view()).unwrap();
+    expect_err_naming(cap.read_frame(2), &depth, "16-bit");
+
+    // Wrong resolution.
+    let gt = cap.frame_paths(3).gt_depth;
+    png::write_depth(&gt, Array2::from_elem((H + 1, W), 1.0).view(), 0.001).unwrap();
+    expect_err_naming(cap.read_frame(3), &gt, "is 8x7");
+
+    // Truncated flow file.
+    let flo = cap.frame_paths(4).flow;
+    let bytes = fs::read(&flo).unwrap();
+    fs::write(&flo, &bytes[..bytes.len() - 4]).unwrap();
+    expect_err_naming(cap.read_frame(4), &flo, "bytes");
+}
+
+#[test]
+fn bad_manifest_names_the_field() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("cap");
+    write_capture(&dir, 2);
+    let path = dir.join("capture.json");
+    let text = fs::read_to_string(&path).unwrap();
+
+    let cases = [
+        (text.replace("\"version\": 1", "\"version\": 9"), "version"),
+        (
+            text.replace("\"depth_scale\": 0.001", "\"depth_scale\": -1.0"),
+            "depth_scale",
+        ),
+        (text.replace("\"width\": 8", "\"width\": 0"), "width"),
+        (
+            text.replace("\"format\": \"dear-capture\"", "\"format\": \"other\""),
+            "format",
+        ),
+        (
+            text.replace("\"depth_scale\"", "\"depth_scael\""),
+            "depth_scael",
+        ),
+        (text.replace("\"id\": 1", "\"id\": 0"), "appears twice"),
+    ];
+    for (bad, what) in cases {
+        assert_ne!(bad, text, "test case for {what} must change the file");
+        fs::write(&path, bad).unwrap();
+        let err = CaptureDir::open(&dir).expect_err("bad manifest must be rejected");
+        let msg = err.to_string();
+        assert!(
+            msg.contains("capture.json") && msg.contains(what),
+            "{what}: {msg}"
+        );
+    }
+    fs::remove_file(&path).unwrap();
+    assert!(CaptureDir::open(&dir)
+        .unwrap_err()
+        .to_string()
+        .contains("missing"));
+}
+
+#[test]
+fn writer_refuses_a_non_empty_directory_and_out_of_order_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("cap");
+    write_capture(&dir, 1);
+    let manifest = CaptureManifest::new(
+        W as u32,
+        H as u32,
+        Intrinsics::from_hfov(W as u32, H as u32, 60.0),
+    );
+    assert!(CaptureWriter::create(&dir, manifest.clone()).is_err());
+    let mut writer = CaptureWriter::create(tmp.path().join("b"), manifest).unwrap();
+    writer.write_frame(&frame(3)).unwrap();
+    assert!(writer.write_frame(&frame(2)).is_err());
+}
