@@ -1,1 +1,24 @@
-//! wire contract
+//! `dear-proto`: the wire contract between `deard` and every client.
+//!
+//! A published frame is one iceoryx2 publish-subscribe sample whose payload is a byte slice
+//! (`[u8]`, 64-byte aligned) and whose user header is [`FrameHeader`]. The payload holds, at the
+//! offsets the header gives:
+//! - aligned refined depth, `f32` metres, `width·height` values, row-major, `0` = invalid;
+//! - the RGB image it is aligned to, `u8`, `width·height·3`, row-major, interleaved R,G,B;
+//! - per-pixel confidence, `u8`, `width·height` (0 = invalid … 255 = measured and kept).
+//!
+//! After each sample the daemon notifies an iceoryx2 *event* service of the same name, so
+//! clients can sleep until a frame arrives instead of polling.
+//!
+//! The README's "Frame layout" section documents the header byte by byte for C and Python
+//! clients; `tests/layout.rs` checks that table against this struct.
+
+pub mod header;
+pub mod service;
+pub mod time;
+
+pub use header::{flags, FrameHeader, PayloadLayout, Stage, FORMAT_VERSION, MAGIC};
+pub use service::{
+    default_service_name, frame_event_service, frame_service, validate_service_name,
+    FrameEventService, FrameService, DEFAULT_CAMERA,
+};
