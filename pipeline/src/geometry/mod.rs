@@ -1,0 +1,30 @@
+//! Geometry of the RGB↔ToF alignment: everything that moves pixels around.
+//!
+//! Conventions shared by every sub-module (and by the Python training package, which checks
+//! itself against the test vectors in `fixtures/geometry/`):
+//! - images are row-major `(row, column)`; pixel centres sit at integer coordinates;
+//! - a [`Flow`](crate::Flow) is defined on the grid of the image being produced: `u` moves along
+//!   columns (x), `v` along rows (y);
+//! - backward warping reads `out(p) = src(p + W(p))`; a sample point outside the convex hull of
+//!   the source's pixel centres is *invalid*, never clamped and never read as a zero depth.
+//!
+//! Modules:
+//! - [`warp`]: backward warping of depth (discontinuity-aware), amplitude and RGB;
+//! - [`lsq`]: the paper's per-axis least squares for `(t, c)`, plain and robust (IRLS/Huber);
+//! - [`flow`]: depth → flow through a [`Calibration`](crate::Calibration);
+//! - [`splat`]: forward splatting with a z-buffer, to synthesise a perturbed RGB view;
+//! - [`fixtures`]: the shared test vectors.
+
+pub mod fixtures;
+pub mod flow;
+pub mod lsq;
+pub mod splat;
+pub mod surface;
+pub mod warp;
+
+pub use flow::{flow_from_depth, flow_from_depth_into};
+pub use lsq::{
+    solve_calibration, solve_calibration_robust, CalibrationFit, LsqError, RobustOptions,
+};
+pub use splat::{synthesize_view, SynthesizedView};
+pub use warp::{warp_bilinear, warp_depth, warp_rgb};

@@ -1,0 +1,368 @@
+//! Backward warping `out(p) = src(p + W(p))` with bilinear interpolation.
+//!
+//! The flow lives on the output grid (`flow.dim() == out.dim()`); the source may have any size.
+//! A sample point is *inside* when it lies in the convex hull of the source's pixel centres,
+//! `0 ≤ x ≤ w−1` and `0 ≤ y ≤ h−1`; anything else (including a non-finite flow) is
+//! *outside* and produces an invalid output (depth 0 / `valid = false` / black), never a clamped
+//! border value. Outputs are written into caller-provided views so that the daemon can warp
+//! straight into shared memory; rows are processed in parallel with rayon.
+//!
+//! Shape mismatches between the flow and the output are programming errors and panic with a
+//! message naming both shapes.
+
+use ndarray::{ArrayView2, ArrayView3, ArrayViewMut1, ArrayViewMut2, ArrayViewMut3, Axis, Zip};
+
+use crate::frame::Flow;
+use crate::geometry::surface::{is_valid_depth, same_surface};
+
+/// The four bilinear neighbours of a sample point and their weights, in the fixed order
+/// `(y0,x0), (y0,x1), (y1,x0), (y1,x1)` (ties between equal weights go to the earlier one).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Taps {
+    /// `(row, column)` of each neighbour.
+    pub idx: [(usize, usize); 4],
+    /// Bilinear weight of each neighbour; they sum to 1.
+    pub w: [f32; 4],
+}
+
+/// Bilinear taps of the sample point `(sx, sy)` (column, row) in an `h × w` image, or `None`
+/// when the point is outside the convex hull of the pixel centres (or not finite).
+#[inline]
+pub(crate) fn bilinear_taps(sx: f32, sy: f32, h: usize, w: usize) -> Option<Taps> {
+    if h == 0 || w == 0 {
+        return None;
+    }
+    // Written so that NaN fails the test.
+    if !(sx >= 0.0 && sx <= (w - 1) as f32 && sy >= 0.0 && sy <= (h - 1) as f32) {
+        return None;
+    }
+    let x0 = (sx.floor() as usize).min(w - 1);
+    let y0 = (sy.floor() as usize).min(h - 1);
+    let x1 = (x0 + 1).min(w - 1);
+    let y1 = (y0 + 1).min(h - 1);
+    let fx = sx - x0 as f32;
+    let fy = sy - y0 as f32;
+    Some(Taps {
+        idx: [(y0, x0), (y0, x1), (y1, x0), (y1, x1)],
+        w: [
+            (1.0 - fx) * (1.0 - fy),
+            fx * (1.0 - fy),
+            (1.0 - fx) * fy,
+            fx * fy,
+        ],
+    })
+}
+
+fn assert_flow_matches(flow: &Flow, out: (usize, usize), what: &str) {
+    assert_eq!(
+        flow.u.dim(),
+        out,
+        "{what}: flow u has shape {:?} but the output is {:?}",
+        flow.u.dim(),
+        out
+    );
+    assert_eq!(
+        flow.v.dim(),
+        out,
+        "{what}: flow v has shape {:?} but the output is {:?}",
+        flow.v.dim(),
+        out
+    );
+}
+
+/// Depth-aware backward warp of a depth map (metres, `0` = invalid).
+///
+/// At each output pixel the four bilinear neighbours are examined: neighbours with zero weight
+/// or invalid depth are ignored; the valid neighbour with the largest weight (the nearest to
+/// the sample point) picks the surface, and only the neighbours on that surface
+/// ([`same_surface`](crate::geometry::surface::same_surface): within 3 % of its depth, at
+/// least 1 cm) are blended, with their weights renormalised. So a sample between a foreground
+/// and a background pixel takes the nearer one's surface instead of inventing a depth in
+/// mid-air, and a sample next to a hole is not pulled towards zero. No valid neighbour, or a
+/// sample outside the source → `0`.
+///
+/// # Panics
+/// If `flow.dim() != out.dim()`.
+pub fn warp_depth(src: ArrayView2<f32>, flow: &Flow, mut out: ArrayViewMut2<f32>) {
+    assert_flow_matches(flow, out.dim(), "warp_depth");
+    let (h, w) = src.dim();
+    Zip::indexed(out.rows_mut())
+        .and(flow.u.rows())
+        .and(flow.v.rows())
+        .par_for_each(|y, mut out_row, u_row, v_row| {
+            for (x, ((o, &u), &v)) in out_row.iter_mut().zip(u_row).zip(v_row).enumerate() {
+                *o = match bilinear_taps(x as f32 + u, y as f32 + v, h, w) {
+                    Some(taps) => sample_depth(&src, &taps),
+                    None => 0.0,
+                };
+            }
+        });
+}
+
+/// The discontinuity-aware blend of [`warp_depth`] at one sample point.
+#[inline]
+fn sample_depth(src: &ArrayView2<f32>, taps: &Taps) -> f32 {
+    let mut z = [0.0f32; 4];
+    let mut nearest: Option<usize> = None;
+    for i in 0..4 {
+        if taps.w[i] <= 0.0 {
+            continue;
+        }
+        let d = src[taps.idx[i]];
+        if !is_valid_depth(d) {
+            continue;
+        }
+        z[i] = d;
+        if nearest.is_none_or(|n| taps.w[i] > taps.w[n]) {
+            nearest = Some(i);
+        }
+    }
+    let Some(n) = nearest else { return 0.0 };
+    let z_ref = z[n];
+    let (mut acc, mut wsum) = (0.0f32, 0.0f32);
+    for i in 0..4 {
+        if z[i] > 0.0 && same_surface(z_ref, z[i]) {
+            acc += taps.w[i] * z[i];
+            wsum += taps.w[i];
+        }
+    }
+    acc / wsum
+}
+
+/// Plain bilinear backward warp for amplitude-like images (every source value is a
+/// measurement; non-finite values propagate).
+///
+/// Outside the source: `out = 0` and, when a `valid` mask is given, `valid = false`; inside,
+/// `valid = true`.
+///
+/// # Panics
+/// If `flow.dim() != out.dim()` or the mask's shape differs from the output's.
+pub fn warp_bilinear(
+    src: ArrayView2<f32>,
+    flow: &Flow,
+    mut out: ArrayViewMut2<f32>,
+    valid: Option<ArrayViewMut2<bool>>,
+) {
+    assert_flow_matches(flow, out.dim(), "warp_bilinear");
+    let (h, w) = src.dim();
+    let row =
+        |y: usize, mut out_row: ArrayViewMut1<f32>, mut valid_row: Option<ArrayViewMut1<bool>>| {
+            let (u_row, v_row) = (flow.u.row(y), flow.v.row(y));
+            for x in 0..out_row.len() {
+                let taps = bilinear_taps(x as f32 + u_row[x], y as f32 + v_row[x], h, w);
+                out_row[x] = match taps {
+                    Some(t) => (0..4)
+                        .map(|i| {
+                            if t.w[i] > 0.0 {
+                                t.w[i] * src[t.idx[i]]
+                            } else {
+                                0.0
+                            }
+                        })
+                        .sum(),
+                    None => 0.0,
+                };
+                if let Some(vr) = valid_row.as_mut() {
+                    vr[x] = taps.is_some();
+                }
+            }
+        };
+    match valid {
+        Some(mut valid) => {
+            assert_eq!(
+                valid.dim(),
+                out.dim(),
+                "warp_bilinear: valid mask shape differs from the output"
+            );
+            Zip::indexed(out.rows_mut())
+                .and(valid.rows_mut())
+                .par_for_each(|y, o, v| row(y, o, Some(v)));
+        }
+        None => Zip::indexed(out.rows_mut()).par_for_each(|y, o| row(y, o, None)),
+    }
+}
+
+/// Bilinear backward warp of an 8-bit image `(H, W, C)` (RGB), rounding to the nearest level.
+///
+/// Outside the source: all channels `0` (black) and, when a `valid` mask is given,
+/// `valid = false`.
+///
+/// # Panics
+/// If the flow's shape differs from the output's `(H, W)`, the channel counts differ, or the
+/// mask's shape differs from `(H, W)`.
+pub fn warp_rgb(
+    src: ArrayView3<u8>,
+    flow: &Flow,
+    mut out: ArrayViewMut3<u8>,
+    valid: Option<ArrayViewMut2<bool>>,
+) {
+    let (oh, ow, oc) = out.dim();
+    assert_flow_matches(flow, (oh, ow), "warp_rgb");
+    let (h, w, c) = src.dim();
+    assert_eq!(
+        c, oc,
+        "warp_rgb: source has {c} channels but the output has {oc}"
+    );
+    let row =
+        |y: usize, mut out_row: ArrayViewMut2<u8>, mut valid_row: Option<ArrayViewMut1<bool>>| {
+            let (u_row, v_row) = (flow.u.row(y), flow.v.row(y));
+            for x in 0..ow {
+                let taps = bilinear_taps(x as f32 + u_row[x], y as f32 + v_row[x], h, w);
+                match taps {
+                    Some(t) => {
+                        for ch in 0..c {
+                            let mut acc = 0.0f32;
+                            for i in 0..4 {
+                                if t.w[i] > 0.0 {
+                                    let (r, col) = t.idx[i];
+                                    acc += t.w[i] * f32::from(src[(r, col, ch)]);
+                                }
+                            }
+                            out_row[(x, ch)] = (acc + 0.5).floor().clamp(0.0, 255.0) as u8;
+                        }
+                    }
+                    None => out_row.row_mut(x).fill(0),
+                }
+                if let Some(vr) = valid_row.as_mut() {
+                    vr[x] = taps.is_some();
+                }
+            }
+        };
+    match valid {
+        Some(mut valid) => {
+            assert_eq!(
+                valid.dim(),
+                (oh, ow),
+                "warp_rgb: valid mask shape differs from the output"
+            );
+            Zip::indexed(out.axis_iter_mut(Axis(0)))
+                .and(valid.rows_mut())
+                .par_for_each(|y, o, v| row(y, o, Some(v)));
+        }
+        None => Zip::indexed(out.axis_iter_mut(Axis(0))).par_for_each(|y, o| row(y, o, None)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::{array, Array2, Array3};
+
+    fn const_flow(h: usize, w: usize, u: f32, v: f32) -> Flow {
+        Flow {
+            u: Array2::from_elem((h, w), u),
+            v: Array2::from_elem((h, w), v),
+        }
+    }
+
+    #[test]
+    fn taps_inside_border_and_outside() {
+        let t = bilinear_taps(1.25, 0.5, 3, 4).unwrap();
+        assert_eq!(t.idx, [(0, 1), (0, 2), (1, 1), (1, 2)]);
+        assert_eq!(t.w, [0.375, 0.125, 0.375, 0.125]);
+        // Exactly on the last centre: inside, all weight on it.
+        let t = bilinear_taps(3.0, 2.0, 3, 4).unwrap();
+        assert_eq!(t.w[0], 1.0);
+        assert_eq!(t.idx[0], (2, 3));
+        assert!(bilinear_taps(3.0001, 1.0, 3, 4).is_none());
+        assert!(bilinear_taps(-0.0001, 1.0, 3, 4).is_none());
+        assert!(bilinear_taps(f32::NAN, 1.0, 3, 4).is_none());
+        assert!(bilinear_taps(0.0, 0.0, 0, 4).is_none());
+    }
+
+    #[test]
+    fn bilinear_of_a_ramp_is_exact_and_outside_is_invalid() {
+        // src(y, x) = 10 y + x: bilinear reproduces it exactly.
+        let src = Array2::from_shape_fn((4, 5), |(y, x)| 10.0 * y as f32 + x as f32);
+        let flow = const_flow(4, 5, 0.25, 0.5);
+        let mut out = Array2::zeros((4, 5));
+        let mut valid = Array2::from_elem((4, 5), true);
+        warp_bilinear(src.view(), &flow, out.view_mut(), Some(valid.view_mut()));
+        for y in 0..4 {
+            for x in 0..5 {
+                let inside = y < 3 && x < 4;
+                assert_eq!(valid[(y, x)], inside, "({y},{x})");
+                let want = if inside {
+                    10.0 * (y as f32 + 0.5) + x as f32 + 0.25
+                } else {
+                    0.0
+                };
+                assert!(
+                    (out[(y, x)] - want).abs() < 1e-5,
+                    "({y},{x}) {} vs {want}",
+                    out[(y, x)]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn depth_blends_on_one_surface() {
+        // Plane at 2.0/2.02 (one surface): ordinary bilinear.
+        let src = array![[2.0f32, 2.02], [2.0, 2.02]];
+        let flow = const_flow(1, 1, 0.25, 0.0);
+        let mut out = Array2::zeros((1, 1));
+        warp_depth(src.view(), &flow, out.view_mut());
+        assert!((out[(0, 0)] - 2.005).abs() < 1e-6);
+    }
+
+    #[test]
+    fn depth_does_not_blend_across_a_step() {
+        // Foreground 1 m on the left, background 3 m on the right.
+        let src = array![[1.0f32, 3.0], [1.0, 3.0]];
+        let mut out = Array2::zeros((1, 1));
+        warp_depth(src.view(), &const_flow(1, 1, 0.4, 0.3), out.view_mut());
+        assert!((out[(0, 0)] - 1.0).abs() < 1e-6, "{}", out[(0, 0)]);
+        warp_depth(src.view(), &const_flow(1, 1, 0.6, 0.3), out.view_mut());
+        assert!((out[(0, 0)] - 3.0).abs() < 1e-6, "{}", out[(0, 0)]);
+        // A plain bilinear warp would give 1.8 here.
+        let mut amp = Array2::zeros((1, 1));
+        warp_bilinear(
+            src.view(),
+            &const_flow(1, 1, 0.4, 0.3),
+            amp.view_mut(),
+            None,
+        );
+        assert!((amp[(0, 0)] - 1.8).abs() < 1e-6);
+    }
+
+    #[test]
+    fn depth_ignores_invalid_neighbours_and_renormalises() {
+        // (0,0) invalid; sample at (0.5, 0.5): the three valid ones share weight 1/4 each.
+        let src = array![[0.0f32, 2.0], [2.01, 2.02]];
+        let mut out = Array2::zeros((1, 1));
+        warp_depth(src.view(), &const_flow(1, 1, 0.5, 0.5), out.view_mut());
+        assert!((out[(0, 0)] - (2.0 + 2.01 + 2.02) / 3.0).abs() < 1e-6);
+        // All invalid → 0; outside → 0.
+        let holes = Array2::<f32>::zeros((2, 2));
+        warp_depth(holes.view(), &const_flow(1, 1, 0.5, 0.5), out.view_mut());
+        assert_eq!(out[(0, 0)], 0.0);
+        warp_depth(src.view(), &const_flow(1, 1, 1.5, 0.0), out.view_mut());
+        assert_eq!(out[(0, 0)], 0.0);
+    }
+
+    #[test]
+    fn rgb_warp_rounds_and_blacks_out_outside() {
+        let src = Array3::from_shape_fn((2, 3, 3), |(y, x, c)| (100 * c + 10 * x + y) as u8);
+        let flow = const_flow(2, 3, 0.5, 0.0);
+        let mut out = Array3::from_elem((2, 3, 3), 7u8);
+        let mut valid = Array2::from_elem((2, 3), true);
+        warp_rgb(src.view(), &flow, out.view_mut(), Some(valid.view_mut()));
+        // (0, 0) samples x = 0.5: channel c is (100c + 0 + 100c + 10)/2 = 100c + 5.
+        assert_eq!(out[(0, 0, 0)], 5);
+        assert_eq!(out[(0, 0, 2)], 205);
+        // (1, 1) samples x = 1.5, y = 1: 100c + 15 + 1.
+        assert_eq!(out[(1, 1, 1)], 116);
+        // x = 2.5 is outside.
+        assert!(!valid[(0, 2)] && valid[(0, 1)]);
+        assert_eq!(out.slice(ndarray::s![0, 2, ..]).to_vec(), vec![0, 0, 0]);
+    }
+
+    #[test]
+    #[should_panic(expected = "warp_depth: flow u has shape")]
+    fn shape_mismatch_panics_with_a_message() {
+        let src = Array2::<f32>::zeros((2, 2));
+        let mut out = Array2::zeros((3, 3));
+        warp_depth(src.view(), &Flow::zeros(2, 2), out.view_mut());
+    }
+}
