@@ -1,0 +1,85 @@
+"""The whole DEAR pipeline as one differentiable module (end-to-end training and evaluation).
+
+Steps (DESIGN.md, "The algorithm"): ``W_rough = F(RGB, I)``; ``D_rgb = D_tof ∘ W_rough``;
+per-axis least squares for ``(t, c)``; ``W_convt = t / D_rgb + c``; ``W_refn = G(W_rough,
+W_convt)``; ``D = D_tof ∘ W_refn``, ``I ∘ W_refn``; ``D_out = KPN(I∘W, D/max_depth, RGB)``.
+
+The warps and the solve are the training-time torch versions from :mod:`dear_train.geometry`;
+in deployment the daemon runs them in Rust between the three exported graphs.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from dear_train.geometry import convt_flow, solve_calibration, warp_bilinear, warp_depth
+from dear_train.models.flownetc import FlowNetC
+from dear_train.models.fusion import FusionNet
+from dear_train.models.kpn import RefineNet
+
+
+class DEAR(nn.Module):
+    """Flow net + fusion net + refinement net with the geometry between them.
+
+    Any of the three may be ``None`` when a stage trains only part of the pipeline.
+    """
+
+    def __init__(
+        self,
+        flow: FlowNetC | None,
+        fusion: FusionNet | None,
+        refine: RefineNet | None,
+        max_depth: float,
+    ) -> None:
+        super().__init__()
+        self.flow = flow
+        self.fusion = fusion
+        self.refine = refine
+        self.max_depth = max_depth
+
+    def align(
+        self, rgb: torch.Tensor, amplitude: torch.Tensor, tof_depth: torch.Tensor
+    ) -> dict[str, torch.Tensor | list[torch.Tensor]]:
+        """Flow estimation: rough flow, calibration solve, fused flow (when a fusion net exists).
+
+        ``tof_depth`` is in metres on the ToF grid; ``amplitude`` normalised on the ToF grid.
+        """
+        if self.flow is None:
+            raise RuntimeError("align() needs a flow net")
+        flows_rough = self.flow(rgb, amplitude)
+        w_rough = flows_rough[-1]
+        out: dict[str, torch.Tensor | list[torch.Tensor]] = {
+            "flows_rough": flows_rough,
+            "flow_rough": w_rough,
+        }
+        if self.fusion is not None:
+            d_rgb, _ = warp_depth(tof_depth, w_rough)
+            calib = solve_calibration(w_rough, d_rgb)
+            w_convt, _ = convt_flow(calib, d_rgb, w_rough)
+            flows_refn = self.fusion(w_rough, w_convt)
+            out.update(
+                calib=calib, flow_convt=w_convt, flows_refn=flows_refn, flow_refn=flows_refn[-1]
+            )
+        return out
+
+    def refine_depth(
+        self, rgb: torch.Tensor, amplitude: torch.Tensor, tof_depth: torch.Tensor, flow: torch.Tensor
+    ) -> dict[str, torch.Tensor]:
+        """Warp ToF depth and amplitude with ``flow`` and refine; depths in metres."""
+        if self.refine is None:
+            raise RuntimeError("refine_depth() needs a refinement net")
+        d_w, d_valid = warp_depth(tof_depth, flow)
+        a_w, _ = warp_bilinear(amplitude, flow)
+        d_out = self.refine(a_w, d_w / self.max_depth, rgb) * self.max_depth
+        return {"depth_warped": d_w, "depth_warped_valid": d_valid, "depth": d_out}
+
+    def forward(
+        self, rgb: torch.Tensor, amplitude: torch.Tensor, tof_depth: torch.Tensor
+    ) -> dict[str, torch.Tensor | list[torch.Tensor]]:
+        """The full pipeline: :meth:`align` then :meth:`refine_depth` with the final flow."""
+        out = self.align(rgb, amplitude, tof_depth)
+        flow = out.get("flow_refn", out["flow_rough"])
+        assert isinstance(flow, torch.Tensor)
+        out.update(self.refine_depth(rgb, amplitude, tof_depth, flow))
+        return out

@@ -1,0 +1,39 @@
+"""The ``edge`` tier: compact nets for real-time inference on a phone-class CPU.
+
+Same architectures and I/O as the paper tier, so the daemon runs either bundle unchanged, but:
+
+- every convolution after the first of a stage is depthwise-separable;
+- channel widths are scaled down (flow ×1/4, fusion ×1/4, refinement 16/32/32/64);
+- the flow net stops at 1/32 and searches ±8 px at 1/8 resolution with stride 2 (81 cost-volume
+  channels instead of 441): the misalignment the daemon corrects is 5–20 px at full resolution,
+  i.e. ≤ 2.5 px at 1/8, so ±8 (±64 px full-res) is ample;
+- the refinement backbone runs at 1/2 resolution and its kernels are upsampled and applied to
+  the full-resolution depth, which keeps the edge-preserving filtering at full resolution.
+
+``models/complexity.py`` measures what this buys (README, "Model sizes").
+"""
+
+from __future__ import annotations
+
+from dear_train.models.flownetc import FlowNetC, FlowNetCConfig
+from dear_train.models.fusion import FusionConfig, FusionNet
+from dear_train.models.kpn import RefineNet, UNetConfig
+
+EDGE_FLOW = FlowNetCConfig(width=0.25, max_displacement=8, stride=2, separable=True, levels=5)
+EDGE_FUSION = FusionConfig(width=0.25, separable=True)
+EDGE_REFINE = UNetConfig(widths=(16, 32, 32, 64), separable=True, backbone_stride=2)
+
+
+def edge_flow() -> FlowNetC:
+    """The edge-tier rough-flow net."""
+    return FlowNetC(EDGE_FLOW)
+
+
+def edge_fusion() -> FusionNet:
+    """The edge-tier fusion net."""
+    return FusionNet(EDGE_FUSION)
+
+
+def edge_refine(variant: str = "kpn") -> RefineNet:
+    """The edge-tier refinement net (any variant of :mod:`dear_train.models.kpn`)."""
+    return RefineNet(variant, EDGE_REFINE)
