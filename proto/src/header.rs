@@ -129,6 +129,14 @@ pub struct FrameHeader {
 
 const _: () = assert!(core::mem::size_of::<FrameHeader>() == 192);
 
+impl Default for FrameHeader {
+    /// An empty 0×0 frame with magic and version set (iceoryx2 initialises loaned headers with
+    /// it; the publisher then overwrites every field).
+    fn default() -> Self {
+        FrameHeader::new(0, 0, 0)
+    }
+}
+
 impl FrameHeader {
     /// A header for a `width`×`height` frame with the payload layout filled in and everything
     /// else zero / unknown.

@@ -1,1 +1,58 @@
-//! tests
+//! Helpers of the end-to-end tests: analytic test captures, the expected pipeline output of a
+//! frame, and process handling for `deard` and the probe client.
+
+pub mod processes;
+pub mod scene;
+
+use sha2::{Digest, Sha256};
+
+/// Hex SHA-256 of bytes (what the probe prints for each frame's payload).
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+use std::collections::BTreeMap;
+
+use dear_pipeline::capture::CaptureDir;
+use dear_proto::{FrameHeader, PayloadLayout};
+use deard::config::RefineMode;
+use deard::processing::{FrameOutput, Processor};
+use ndarray::{Array2, Array3};
+
+/// What the daemon must publish for each readable frame of `capture` (frame id → SHA-256 of
+/// the payload), computed in this process by the same `deard` processing code.
+pub fn expected_payload_hashes(capture: &CaptureDir, refine: RefineMode) -> BTreeMap<u64, String> {
+    let (w, h) = capture.size();
+    let calibration = capture.manifest().initial_calibration;
+    let mut processor = Processor::new(w, h, calibration, refine);
+    let layout = PayloadLayout::new(w, h);
+    let mut hashes = BTreeMap::new();
+    for position in 0..capture.len() {
+        let Ok(frame) = capture.read_frame(position) else {
+            continue;
+        };
+        let (hu, wu) = (h as usize, w as usize);
+        let mut depth = Array2::<f32>::zeros((hu, wu));
+        let mut rgb = Array3::<u8>::zeros((hu, wu, 3));
+        let mut confidence = Array2::<u8>::zeros((hu, wu));
+        let mut header = FrameHeader::new(frame.index, w, h);
+        let out = FrameOutput {
+            depth: depth.view_mut(),
+            rgb: rgb.view_mut(),
+            confidence: confidence.view_mut(),
+        };
+        if processor.process_into(&frame, &mut header, out).is_err() {
+            continue;
+        }
+        let mut payload = Vec::with_capacity(layout.size);
+        payload.extend(depth.iter().flat_map(|z| z.to_le_bytes()));
+        payload.extend(rgb.iter());
+        payload.extend(confidence.iter());
+        assert_eq!(payload.len(), layout.size);
+        hashes.insert(frame.index, sha256_hex(&payload));
+    }
+    hashes
+}

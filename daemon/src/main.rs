@@ -1,0 +1,149 @@
+//! `deard` command line: configuration file plus overriding flags.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+use clap::Parser;
+use deard::config::{Config, Pacing, RefineMode};
+
+/// DEAR daemon: aligned, refined ToF depth for every app on the machine, over shared memory.
+#[derive(Debug, Parser)]
+#[command(version, about)]
+struct Cli {
+    /// TOML configuration file (see daemon/deard.example.toml); flags below override it.
+    #[arg(short, long)]
+    config: Option<PathBuf>,
+    /// Capture directory to replay ([capture] path).
+    #[arg(long)]
+    replay: Option<PathBuf>,
+    /// Camera name; the service is dear/<camera>/frames ([service] camera).
+    #[arg(long)]
+    camera: Option<String>,
+    /// Explicit service name ([service] name).
+    #[arg(long)]
+    service: Option<String>,
+    /// Replay pacing: timestamps or fast ([capture] pacing).
+    #[arg(long, value_parser = parse_pacing)]
+    pacing: Option<Pacing>,
+    /// Loop the replay ([capture] loop).
+    #[arg(long = "loop")]
+    loop_: bool,
+    /// First frame position ([capture] start).
+    #[arg(long)]
+    start: Option<usize>,
+    /// One past the last frame position ([capture] end).
+    #[arg(long)]
+    end: Option<usize>,
+    /// Refinement: classical or none ([pipeline] refine).
+    #[arg(long, value_parser = parse_refine)]
+    refine: Option<RefineMode>,
+    /// Exit when a non-looping replay ends ([runtime] exit_when_done).
+    #[arg(long)]
+    exit_when_done: bool,
+    /// Seconds between statistics lines ([runtime] stats_interval_s).
+    #[arg(long)]
+    stats_interval: Option<f64>,
+    /// Print the effective configuration as TOML and exit.
+    #[arg(long)]
+    print_config: bool,
+}
+
+fn parse_pacing(s: &str) -> Result<Pacing, String> {
+    match s {
+        "timestamps" => Ok(Pacing::Timestamps),
+        "fast" => Ok(Pacing::Fast),
+        _ => Err(format!("{s:?}: expected \"timestamps\" or \"fast\"")),
+    }
+}
+
+fn parse_refine(s: &str) -> Result<RefineMode, String> {
+    match s {
+        "classical" => Ok(RefineMode::Classical),
+        "none" => Ok(RefineMode::None),
+        _ => Err(format!("{s:?}: expected \"classical\" or \"none\"")),
+    }
+}
+
+fn effective_config(cli: &Cli) -> Result<Config, String> {
+    let mut config = match &cli.config {
+        Some(path) => Config::from_file(path)?,
+        None => Config::default(),
+    };
+    if let Some(path) = &cli.replay {
+        config.capture.path = path.clone();
+    }
+    if let Some(camera) = &cli.camera {
+        config.service.camera = camera.clone();
+    }
+    if let Some(name) = &cli.service {
+        config.service.name = Some(name.clone());
+    }
+    if let Some(pacing) = cli.pacing {
+        config.capture.pacing = pacing;
+    }
+    if cli.loop_ {
+        config.capture.loop_ = true;
+    }
+    if let Some(start) = cli.start {
+        config.capture.start = start;
+    }
+    if let Some(end) = cli.end {
+        config.capture.end = Some(end);
+    }
+    if let Some(refine) = cli.refine {
+        config.pipeline.refine = refine;
+    }
+    if cli.exit_when_done {
+        config.runtime.exit_when_done = true;
+    }
+    if let Some(s) = cli.stats_interval {
+        config.runtime.stats_interval_s = s;
+    }
+    config.validate()?;
+    Ok(config)
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let config = match effective_config(&cli) {
+        Ok(config) => config,
+        Err(e) => {
+            eprintln!("deard: configuration error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    if cli.print_config {
+        print!(
+            "{}",
+            toml::to_string_pretty(&config).expect("config serialises")
+        );
+        return ExitCode::SUCCESS;
+    }
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(&config.runtime.log));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .init();
+    // iceoryx2 warns on every start that it uses its built-in defaults (we ship no iceoryx2
+    // config file on purpose); keep its own log to errors unless IOX2_LOG_LEVEL says otherwise.
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+
+    let shutdown = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        if let Err(e) = signal_hook::flag::register(signal, shutdown.clone()) {
+            eprintln!("deard: cannot install a handler for signal {signal}: {e}");
+            return ExitCode::FAILURE;
+        }
+    }
+    match deard::run::run(&config, shutdown) {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("{e}");
+            eprintln!("deard: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,132 @@
+//! Publishing frames over iceoryx2: each frame is written by the pipeline directly into a
+//! loaned shared-memory sample (no intermediate frame buffer), sent, and announced on the event
+//! service so subscribers wake up.
+
+use std::time::Instant;
+
+use dear_proto::service::{frame_event_service, frame_service, FrameEventService, FrameService};
+use dear_proto::{FrameHeader, PayloadLayout, Stage};
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::*;
+use ndarray::{ArrayViewMut2, ArrayViewMut3};
+
+use crate::processing::{micros, FrameOutput};
+
+/// The daemon's publishing end of one frame service.
+pub struct FramePublisher {
+    name: String,
+    node: Node<ipc::Service>,
+    publisher: Publisher<ipc::Service, [u8], FrameHeader>,
+    notifier: Notifier<ipc::Service>,
+    layout: PayloadLayout,
+    // Keep the port factories alive as long as the ports.
+    _frames: FrameService,
+    _events: FrameEventService,
+}
+
+impl FramePublisher {
+    /// Creates the node, cleans up what crashed processes left behind, and opens the services.
+    pub fn new(name: &str, width: u32, height: u32) -> Result<Self, String> {
+        let node = NodeBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| format!("cannot create the iceoryx2 node: {e:?}"))?;
+        let cleanup = node.try_cleanup_dead_nodes();
+        tracing::info!(?cleanup, "removed stale resources of dead processes");
+        let frames = frame_service(&node, name)?;
+        let events = frame_event_service(&node, name)?;
+        let layout = PayloadLayout::new(width, height);
+        let publisher = frames
+            .publisher_builder()
+            .initial_max_slice_len(layout.size)
+            .create()
+            .map_err(|e| format!("cannot create a publisher on {name:?}: {e:?}"))?;
+        let notifier = events
+            .notifier_builder()
+            .create()
+            .map_err(|e| format!("cannot create a notifier on {name:?}: {e:?}"))?;
+        Ok(FramePublisher {
+            name: name.to_string(),
+            node,
+            publisher,
+            notifier,
+            layout,
+            _frames: frames,
+            _events: events,
+        })
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Loans a sample, lets `fill` write the frame into it, stamps and sends it, and notifies
+    /// listeners. Returns the header as sent. If `fill` fails the sample is dropped unsent and
+    /// the error returned.
+    pub fn publish(
+        &self,
+        mut header: FrameHeader,
+        arrived: Instant,
+        fill: impl FnOnce(&mut FrameHeader, FrameOutput<'_>) -> Result<(), String>,
+    ) -> Result<FrameHeader, String> {
+        let layout = self.layout;
+        let t_loan = Instant::now();
+        // `loan_slice` zero-fills (one memset); the frame itself is never copied afterwards.
+        let mut sample = self
+            .publisher
+            .loan_slice(layout.size)
+            .map_err(|e| format!("cannot loan a sample on {:?}: {e:?}", self.name))?;
+        let loan_us = micros(t_loan);
+        let payload = sample.payload_mut();
+        let (depth_bytes, rest) = payload.split_at_mut(layout.rgb_offset);
+        let (rgb_bytes, confidence_bytes) =
+            rest.split_at_mut(layout.confidence_offset - layout.rgb_offset);
+        let depth_floats = bytes_as_f32(depth_bytes)?;
+        let shape = (layout.height, layout.width);
+        let output = FrameOutput {
+            depth: ArrayViewMut2::from_shape(shape, depth_floats).expect("layout"),
+            rgb: ArrayViewMut3::from_shape((layout.height, layout.width, 3), rgb_bytes)
+                .expect("layout"),
+            confidence: ArrayViewMut2::from_shape(shape, &mut confidence_bytes[..layout.pixels()])
+                .expect("layout"),
+        };
+        fill(&mut header, output)?;
+        // The send itself happens after the header is written, so "publish" covers the loan
+        // (and its zero fill); the notify cost shows up in the next frame's idle time.
+        header.stage_latency_us[Stage::Publish as usize] = loan_us;
+        header.stage_latency_us[Stage::Total as usize] = micros(arrived);
+        header.publish_timestamp_ns = dear_proto::time::monotonic_ns();
+        *sample.user_header_mut() = header;
+        sample
+            .send()
+            .map_err(|e| format!("cannot send on {:?}: {e:?}", self.name))?;
+        if let Err(e) = self.notifier.notify() {
+            tracing::warn!(error = ?e, "cannot notify listeners");
+        }
+        Ok(header)
+    }
+
+    /// Removes ports of subscribers that died without cleaning up, so their queues stop taking
+    /// samples. Called periodically by the daemon.
+    pub fn cleanup_dead_peers(&self) {
+        let state = self.node.try_cleanup_dead_nodes();
+        tracing::debug!(?state, "dead-node cleanup");
+    }
+}
+
+/// Reinterprets the depth plane as `f32`. The payload is 64-byte aligned and the depth plane
+/// starts at offset 0 with a length of `4·pixels`, so this cannot fail unless the service was
+/// created with another alignment.
+fn bytes_as_f32(bytes: &mut [u8]) -> Result<&mut [f32], String> {
+    if bytes.as_ptr() as usize % std::mem::align_of::<f32>() != 0 || bytes.len() % 4 != 0 {
+        return Err("the shared-memory payload is not aligned for f32".into());
+    }
+    // SAFETY: alignment and length checked above; every byte pattern is a valid f32; the
+    // returned slice borrows `bytes` mutably, so no aliasing.
+    Ok(
+        unsafe {
+            std::slice::from_raw_parts_mut(bytes.as_mut_ptr().cast::<f32>(), bytes.len() / 4)
+        },
+    )
+}

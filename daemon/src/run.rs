@@ -1,0 +1,142 @@
+//! The daemon's life: open the source and the service, run capture and processing on their own
+//! threads joined by a bounded queue, publish, report, and shut down cleanly on SIGINT/SIGTERM.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::thread;
+use std::time::{Duration, Instant};
+
+use dear_proto::{FrameHeader, Stage};
+
+use crate::capture::replay::ReplaySource;
+use crate::capture::{FrameSource, SourceItem};
+use crate::config::{Config, Pacing};
+use crate::processing::Processor;
+use crate::publish::FramePublisher;
+use crate::queue::{FrameQueue, Overflow};
+use crate::stats::Stats;
+
+/// How often ports of dead subscribers are reclaimed.
+const DEAD_PEER_CLEANUP: Duration = Duration::from_secs(1);
+
+/// Runs the daemon until the source ends (with `exit_when_done`) or `shutdown` is raised.
+/// Returns the final statistics.
+pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> {
+    let source = ReplaySource::open(&config.capture)?;
+    let (width, height) = source.size();
+    let calibration = config
+        .pipeline
+        .static_calibration
+        .unwrap_or_else(|| source.initial_calibration());
+    let service = config.service.service_name();
+    tracing::info!(source = %source.describe(), %service, width, height, ?calibration, refine = ?config.pipeline.refine, "starting");
+
+    let publisher = FramePublisher::new(&service, width, height)?;
+    let mut processor = Processor::new(width, height, calibration, config.pipeline.refine);
+    let overflow = match config.capture.pacing {
+        Pacing::Timestamps => Overflow::DropOldest,
+        Pacing::Fast => Overflow::Block,
+    };
+    let queue = Arc::new(FrameQueue::new(config.capture.queue_depth, overflow));
+    let capture = spawn_capture(Box::new(source), queue.clone(), shutdown.clone());
+
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
+    tracing::info!(%service, "serving");
+    let mut stats = Stats::new(Duration::from_secs_f64(config.runtime.stats_interval_s));
+    let mut last_cleanup = Instant::now();
+    let mut source_ended = false;
+    while !shutdown.load(Ordering::Relaxed) {
+        match queue.pop(Duration::from_millis(100)) {
+            Some(SourceItem::Frame {
+                frame,
+                arrived,
+                decode_us,
+            }) => {
+                let mut header = FrameHeader::new(frame.index, width, height);
+                header.capture_timestamp_ns = frame.timestamp_ns;
+                header.stage_latency_us[Stage::Capture as usize] = decode_us;
+                header.frames_skipped = stats.skipped;
+                header.frames_dropped = queue.dropped();
+                match publisher.publish(header, arrived, |h, out| {
+                    processor.process_into(&frame, h, out)
+                }) {
+                    Ok(sent) => stats.record(&sent),
+                    Err(reason) => {
+                        stats.skipped += 1;
+                        tracing::warn!(frame = frame.index, %reason, "frame skipped");
+                    }
+                }
+            }
+            Some(SourceItem::Skipped { frame_id, reason }) => {
+                stats.skipped += 1;
+                tracing::warn!(frame = frame_id, %reason, skipped_total = stats.skipped, "frame skipped");
+            }
+            Some(SourceItem::End) => {
+                source_ended = true;
+                tracing::info!(
+                    published = stats.published,
+                    skipped = stats.skipped,
+                    dropped = queue.dropped(),
+                    "source finished"
+                );
+                if config.runtime.exit_when_done {
+                    break;
+                }
+                tracing::info!(
+                    "keeping the service up until stopped (runtime.exit_when_done = false)"
+                );
+            }
+            None => {}
+        }
+        if last_cleanup.elapsed() >= DEAD_PEER_CLEANUP {
+            publisher.cleanup_dead_peers();
+            last_cleanup = Instant::now();
+        }
+        if let Some(report) = stats.poll() {
+            if !(source_ended && report.fps == 0.0) {
+                tracing::info!(
+                    published = stats.published,
+                    skipped = stats.skipped,
+                    dropped = queue.dropped(),
+                    "{report}"
+                );
+            }
+        }
+    }
+    let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
+    queue.close();
+    stats.dropped = queue.dropped();
+    if capture.join().is_err() {
+        tracing::error!("the capture thread panicked");
+    }
+    tracing::info!(
+        published = stats.published,
+        skipped = stats.skipped,
+        dropped = stats.dropped,
+        uptime_s = stats.uptime_s(),
+        "stopped"
+    );
+    Ok(stats)
+}
+
+/// The capture thread: pulls items from the source into the queue until the source ends, the
+/// queue closes or shutdown is requested.
+fn spawn_capture(
+    mut source: Box<dyn FrameSource>,
+    queue: Arc<FrameQueue<SourceItem>>,
+    shutdown: Arc<AtomicBool>,
+) -> thread::JoinHandle<()> {
+    thread::Builder::new()
+        .name("capture".into())
+        .spawn(move || {
+            while !shutdown.load(Ordering::Relaxed) {
+                let item = source.next_item();
+                let end = matches!(item, SourceItem::End);
+                // Only good frames may be dropped; skip reports and the end marker always arrive.
+                if !queue.push(item, |i| matches!(i, SourceItem::Frame { .. })) || end {
+                    break;
+                }
+            }
+        })
+        .expect("spawn capture thread")
+}

@@ -1,0 +1,169 @@
+//! `deard` and client processes over real iceoryx2 shared memory.
+
+use std::time::Duration;
+
+use dear_e2e_tests::processes::{unique_service, Daemon, Probe};
+use dear_e2e_tests::{expected_payload_hashes, scene};
+use dear_pipeline::Calibration;
+use deard::config::RefineMode;
+
+const W: u32 = 160;
+const H: u32 = 120;
+const WAIT: Duration = Duration::from_secs(30);
+
+fn calibration() -> Calibration {
+    Calibration {
+        tx: 4.0,
+        ty: 0.5,
+        cx: 1.5,
+        cy: -1.0,
+    }
+}
+
+#[test]
+fn two_clients_receive_every_frame_in_order_with_the_pipeline_output() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = scene::write_capture(&tmp.path().join("cap"), 12, W, H, calibration());
+    let expected = expected_payload_hashes(&capture, RefineMode::Classical);
+    assert_eq!(expected.len(), 12);
+    let service = unique_service("two-clients");
+    let a = Probe::start(&service, 12);
+    let b = Probe::start(&service, 12);
+    let mut daemon = Daemon::start(
+        &service,
+        &["--replay", capture.root().to_str().unwrap()],
+        &tmp.path().join("deard.log"),
+    );
+    for probe in [&a, &b] {
+        let seen = probe.take(12, WAIT);
+        let ids: Vec<u64> = seen.iter().map(|s| s.frame_id).collect();
+        assert_eq!(ids, (0..12).collect::<Vec<_>>(), "every frame, in order");
+        for s in &seen {
+            assert_eq!(
+                s.sha256, expected[&s.frame_id],
+                "frame {} content differs from the pipeline's",
+                s.frame_id
+            );
+            assert_eq!((s.skipped, s.dropped), (0, 0));
+        }
+    }
+    let status = daemon.terminate(WAIT).expect("deard stops on SIGTERM");
+    assert!(
+        status.success(),
+        "clean exit on SIGTERM: {status:?}\n{}",
+        daemon.log_text()
+    );
+    assert!(
+        daemon.log_text().contains("stopped"),
+        "{}",
+        daemon.log_text()
+    );
+}
+
+#[test]
+fn killing_a_client_disturbs_neither_the_daemon_nor_the_other_client() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = scene::write_capture(&tmp.path().join("cap"), 30, W, H, calibration());
+    let service = unique_service("kill-client");
+    let survivor = Probe::start(&service, 30);
+    let mut victim = Probe::start(&service, 1000);
+    let mut daemon = Daemon::start(
+        &service,
+        &["--replay", capture.root().to_str().unwrap()],
+        &tmp.path().join("deard.log"),
+    );
+    let before = victim.take(5, WAIT);
+    assert_eq!(before.last().unwrap().frame_id, 4);
+    victim.crash();
+    let seen = survivor.take(30, WAIT);
+    let ids: Vec<u64> = seen.iter().map(|s| s.frame_id).collect();
+    assert_eq!(
+        ids,
+        (0..30).collect::<Vec<_>>(),
+        "the other client keeps getting every frame"
+    );
+    assert!(
+        daemon.is_running(),
+        "daemon survives a client crash:\n{}",
+        daemon.log_text()
+    );
+    assert!(daemon.terminate(WAIT).expect("stops").success());
+}
+
+#[test]
+fn a_restarted_daemon_is_picked_up_by_a_running_client() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = scene::write_capture(&tmp.path().join("cap"), 16, W, H, calibration());
+    let expected = expected_payload_hashes(&capture, RefineMode::Classical);
+    let service = unique_service("restart");
+    let root = capture.root().to_str().unwrap();
+    let probe = Probe::start(&service, 16);
+    let mut first = Daemon::start(
+        &service,
+        &["--replay", root, "--end", "8"],
+        &tmp.path().join("deard1.log"),
+    );
+    let seen_first = probe.take(8, WAIT);
+    first.crash();
+    let mut second = Daemon::start(
+        &service,
+        &["--replay", root, "--start", "8"],
+        &tmp.path().join("deard2.log"),
+    );
+    let seen_second = probe.take(8, WAIT);
+    let ids: Vec<u64> = seen_first
+        .iter()
+        .chain(&seen_second)
+        .map(|s| s.frame_id)
+        .collect();
+    assert_eq!(ids, (0..16).collect::<Vec<_>>());
+    for s in seen_first.iter().chain(&seen_second) {
+        assert_eq!(s.sha256, expected[&s.frame_id]);
+    }
+    assert!(second.terminate(WAIT).expect("stops").success());
+}
+
+#[test]
+fn bad_frames_are_skipped_counted_and_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = scene::write_capture(&tmp.path().join("cap"), 10, W, H, calibration());
+    // A corrupt PNG, a missing file and a frame of the wrong resolution.
+    let corrupt = capture.frame_paths(2).rgb;
+    let bytes = std::fs::read(&corrupt).unwrap();
+    std::fs::write(&corrupt, &bytes[..bytes.len() / 3]).unwrap();
+    let missing = capture.frame_paths(5).amplitude;
+    std::fs::remove_file(&missing).unwrap();
+    let wrong_size = capture.frame_paths(7).depth;
+    let small = ndarray::Array2::<f32>::from_elem((H as usize / 2, W as usize / 2), 1.0);
+    dear_pipeline::capture::png::write_depth(&wrong_size, small.view(), 0.001).unwrap();
+    let expected = expected_payload_hashes(&capture, RefineMode::Classical);
+
+    let service = unique_service("bad-frames");
+    let probe = Probe::start(&service, 7);
+    let mut daemon = Daemon::start(
+        &service,
+        &["--replay", capture.root().to_str().unwrap()],
+        &tmp.path().join("deard.log"),
+    );
+    let seen = probe.take(7, WAIT);
+    let ids: Vec<u64> = seen.iter().map(|s| s.frame_id).collect();
+    assert_eq!(ids, vec![0, 1, 3, 4, 6, 8, 9]);
+    for s in &seen {
+        assert_eq!(s.sha256, expected[&s.frame_id]);
+    }
+    assert_eq!(
+        seen.last().unwrap().skipped,
+        3,
+        "skipped frames are counted in the header"
+    );
+    assert!(daemon.is_running(), "bad frames never stop the daemon");
+    assert!(daemon.terminate(WAIT).expect("stops").success());
+    let log = daemon.log_text();
+    for path in [&corrupt, &missing, &wrong_size] {
+        assert!(
+            log.contains(&*path.to_string_lossy()),
+            "log names {}:\n{log}",
+            path.display()
+        );
+    }
+}
