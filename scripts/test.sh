@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Runs every test of the project (what CI runs): lints, Rust unit and end-to-end tests, Python
+# tests. Installs what it needs first (scripts/setup.sh).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+scripts/setup.sh
+
+echo "== cargo fmt";    cargo fmt --all --check
+echo "== cargo clippy"; cargo clippy --workspace --all-targets --quiet -- -D warnings
+echo "== cargo test";   cargo test --workspace
+
+if [ -d train ]; then
+    echo "== ruff";   .venv/bin/ruff check train && .venv/bin/ruff format --check train
+    echo "== pytest"; (cd train && ../.venv/bin/python -m pytest -q tests)
+fi
