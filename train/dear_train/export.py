@@ -1,0 +1,329 @@
+"""``dear-export``: write a model bundle (three ONNX graphs + ``model.json``) from a checkpoint.
+
+Bundle layout::
+
+    flow.onnx     rough flow      (rgb, amplitude)           → flow
+    fuse.onnx     flow fusion     (flow_rough, flow_convt)   → flow_refined
+    refine.onnx   depth refine    (amplitude, depth, rgb)    → depth_refined
+    model.json    manifest: I/O contract, normalisation, recipe, metrics, SHA-256 of each file
+
+The graphs hold only the networks: the warps, the least-squares calibration and the
+normalisation run in the daemon (Rust), so no graph contains ``GridSample``. Each graph is
+exported with the TorchScript-based exporter (``dynamo=False``, opset 17: every op tract
+needs is stable there), self-contained (no external ``.onnx.data``), with dynamic ``N``, ``H``
+and ``W``, and is checked against PyTorch with onnxruntime at two input sizes before the
+manifest is written. See ``train/README.md``, "Graph I/O contract".
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import platform
+from pathlib import Path
+
+import numpy as np
+import onnx
+import torch
+from torch import nn
+
+import dear_train
+from dear_train.data.dataset import normalize_amplitude
+from dear_train.data.synthetic import render_scene
+from dear_train.models import INPUT_SIZE_MULTIPLE, param_count
+from dear_train.models.complexity import count_macs
+from dear_train.models.dear import DEAR
+from dear_train.models.flownetc import FlowNetC
+from dear_train.models.fusion import FusionNet
+from dear_train.models.kpn import RefineNet, uses_rgb
+from dear_train.training.checkpoint import load, load_model
+from dear_train.training.config import Profile
+
+FORMAT = "dear-model-bundle"
+FORMAT_VERSION = 1
+OPSET = 17
+#: Largest allowed |ONNX − PyTorch| on the check inputs (flows in px, depths in m).
+CHECK_ATOL = 1e-4
+
+
+class FlowGraph(nn.Module):
+    """``(rgb, amplitude)`` → full-resolution ``W_rough``."""
+
+    def __init__(self, net: FlowNetC) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, rgb: torch.Tensor, amplitude: torch.Tensor) -> torch.Tensor:
+        return self.net(rgb, amplitude)[-1]
+
+
+class FuseGraph(nn.Module):
+    """``(flow_rough, flow_convt)`` → full-resolution ``W_refn``."""
+
+    def __init__(self, net: FusionNet) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, flow_rough: torch.Tensor, flow_convt: torch.Tensor) -> torch.Tensor:
+        return self.net(flow_rough, flow_convt)[-1]
+
+
+class RefineGraph(nn.Module):
+    """``(amplitude, depth[, rgb])`` → refined depth, depths in metres.
+
+    The ``/ max_depth`` and ``× max_depth`` around the network are part of the graph, so the
+    daemon passes and receives metres and cannot get the depth scaling wrong.
+    """
+
+    def __init__(self, net: RefineNet, max_depth: float) -> None:
+        super().__init__()
+        self.net = net
+        self.max_depth = max_depth
+
+    def forward(
+        self, amplitude: torch.Tensor, depth: torch.Tensor, rgb: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        return self.net(amplitude, depth / self.max_depth, rgb) * self.max_depth
+
+
+def _tensor_io(name: str, channels: int, meaning: str) -> dict:
+    return {
+        "name": name,
+        "shape": ["N", channels, "H", "W"],
+        "dtype": "float32",
+        "layout": "NCHW",
+        "meaning": meaning,
+    }
+
+
+def graph_specs(variant: str) -> dict[str, dict]:
+    """Names, shapes and meanings of every graph's inputs and outputs (the I/O contract)."""
+    rgb = _tensor_io("rgb", 3, "RGB image on the RGB grid, R,G,B channels, value/255 in [0,1]")
+    refine_inputs = [
+        _tensor_io(
+            "amplitude",
+            1,
+            "normalised ToF amplitude backward-warped to the RGB grid with flow_refined "
+            "(bilinear; 0 outside the image)",
+        ),
+        _tensor_io(
+            "depth",
+            1,
+            "ToF depth in metres backward-warped to the RGB grid with flow_refined "
+            "(discontinuity-aware warp_depth); 0 = invalid",
+        ),
+    ]
+    if uses_rgb(variant):
+        refine_inputs.append(rgb)
+    return {
+        "flow": {
+            "file": "flow.onnx",
+            "inputs": [
+                rgb,
+                _tensor_io(
+                    "amplitude",
+                    1,
+                    "normalised ToF amplitude on the ToF grid: clip(I_raw*D^2 / "
+                    "percentile_p(I_raw*D^2 over valid D), 0, 1), D in metres",
+                ),
+            ],
+            "outputs": [
+                _tensor_io(
+                    "flow",
+                    2,
+                    "W_rough in pixels on the RGB grid; channel 0 = u (columns), 1 = v (rows); "
+                    "RGB pixel p sees ToF pixel p + W(p)",
+                )
+            ],
+        },
+        "fuse": {
+            "file": "fuse.onnx",
+            "inputs": [
+                _tensor_io("flow_rough", 2, "W_rough from flow.onnx, pixels"),
+                _tensor_io(
+                    "flow_convt",
+                    2,
+                    "W_convt = (tx/D_rgb + cx, ty/D_rgb + cy) from the least-squares "
+                    "calibration, D_rgb = warp_depth(D_tof, W_rough) in metres; where D_rgb is "
+                    "invalid (0), W_rough instead",
+                ),
+            ],
+            "outputs": [_tensor_io("flow_refined", 2, "W_refn in pixels, same convention")],
+        },
+        "refine": {
+            "file": "refine.onnx",
+            "inputs": refine_inputs,
+            "outputs": [
+                _tensor_io("depth_refined", 1, "refined depth on the RGB grid, metres")
+            ],
+        },
+    }
+
+
+def check_inputs(variant: str, max_depth: float, percentile: float, h: int, w: int) -> dict:
+    """Deterministic, realistic inputs for each graph (a synthetic scene at ``h × w``)."""
+    scene = render_scene(np.random.default_rng(7), h, w)
+    rgb = torch.from_numpy(scene["rgb"].astype(np.float32) / 255).permute(2, 0, 1)[None]
+    amp = torch.from_numpy(
+        normalize_amplitude(scene["amplitude"], scene["tof_depth"], percentile)
+    )[None, None]
+    depth = torch.from_numpy(scene["tof_depth"])[None, None]
+    yy, xx = torch.meshgrid(torch.arange(h) / h, torch.arange(w) / w, indexing="ij")
+    flow = torch.stack([6 * torch.sin(3 * xx) - 2, 4 * torch.cos(2 * yy) + 1])[None]
+    refine = (amp, depth, rgb) if uses_rgb(variant) else (amp, depth)
+    return {"flow": (rgb, amp), "fuse": (flow, flow + 0.5 * torch.sin(7 * xx)), "refine": refine}
+
+
+def sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def export_graph(module: nn.Module, inputs: tuple, spec: dict, path: Path) -> None:
+    """Export one graph (TorchScript exporter, opset 17, dynamic N/H/W, one file)."""
+    names_in = [i["name"] for i in spec["inputs"]]
+    names_out = [o["name"] for o in spec["outputs"]]
+    dyn = {n: {0: "N", 2: "H", 3: "W"} for n in names_in + names_out}
+    module.eval()
+    with torch.no_grad():
+        torch.onnx.export(
+            module,
+            inputs,
+            str(path),
+            input_names=names_in,
+            output_names=names_out,
+            dynamic_axes=dyn,
+            opset_version=OPSET,
+            do_constant_folding=True,
+            dynamo=False,
+        )
+    model = onnx.load(str(path), load_external_data=False)
+    onnx.checker.check_model(model)
+    ops = {n.op_type for n in model.graph.node}
+    if "GridSample" in ops:
+        raise RuntimeError(f"{path}: graph contains GridSample; the daemon does the warping")
+    for init in model.graph.initializer:
+        if init.data_location == onnx.TensorProto.EXTERNAL:
+            raise RuntimeError(f"{path}: initializer {init.name} is stored externally")
+
+
+def verify_graph(module: nn.Module, inputs: tuple, path: Path, spec: dict) -> float:
+    """Max |onnxruntime − PyTorch| on ``inputs``; raises above :data:`CHECK_ATOL`."""
+    import onnxruntime as ort
+
+    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    feed = {i["name"]: x.numpy() for i, x in zip(spec["inputs"], inputs, strict=True)}
+    (got,) = sess.run(None, feed)
+    with torch.no_grad():
+        want = module(*inputs).numpy()
+    if got.shape != want.shape:
+        raise RuntimeError(f"{path}: ONNX output {got.shape} vs PyTorch {want.shape}")
+    diff = float(np.abs(got - want).max())
+    if not diff <= CHECK_ATOL:
+        raise RuntimeError(f"{path}: ONNX differs from PyTorch by {diff:.3g} > {CHECK_ATOL}")
+    return diff
+
+
+def export_bundle(
+    model: DEAR,
+    profile: Profile,
+    out: Path,
+    extra: dict | None = None,
+    check: bool = True,
+    check_sizes: tuple[tuple[int, int], ...] = ((96, 128), (64, 80)),
+) -> dict:
+    """Export ``model`` to the bundle directory ``out``; returns the manifest it wrote."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    assert model.flow is not None and model.fusion is not None and model.refine is not None
+    norm = profile.norm
+    modules: dict[str, nn.Module] = {
+        "flow": FlowGraph(model.flow).eval(),
+        "fuse": FuseGraph(model.fusion).eval(),
+        "refine": RefineGraph(model.refine, norm.max_depth).eval(),
+    }
+    specs = graph_specs(profile.variant)
+    sizes = [check_inputs(profile.variant, norm.max_depth, norm.amplitude_percentile, h, w)
+             for h, w in check_sizes]
+    graphs = {}
+    for name, module in modules.items():
+        path = out / specs[name]["file"]
+        export_graph(module, sizes[0][name], specs[name], path)
+        entry = dict(specs[name])
+        if check:
+            entry["check"] = {
+                "runtime": "onnxruntime",
+                "sizes": [list(s) for s in check_sizes],
+                "max_abs_diff": max(
+                    verify_graph(module, s[name], path, specs[name]) for s in sizes
+                ),
+                "tolerance": CHECK_ATOL,
+            }
+        entry["params"] = param_count(module)
+        entry["gmac_at_640x480"] = round(
+            count_macs(module, lambda m=module, i=_at_vga(sizes[0][name]): m(*i)) / 1e9, 4
+        )
+        entry["bytes"] = path.stat().st_size
+        entry["sha256"] = sha256(path)
+        graphs[name] = entry
+    manifest = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "tier": profile.tier,
+        "variant": profile.variant,
+        "opset": OPSET,
+        "input_size_multiple": INPUT_SIZE_MULTIPLE,
+        "normalisation": {
+            "max_depth_m": norm.max_depth,
+            "amplitude_percentile": norm.amplitude_percentile,
+            "amplitude": "clip(I_raw * D^2 / percentile(I_raw * D^2 over pixels with valid D), 0, 1)",
+            "rgb": "value / 255",
+            "depth": "metres in and out of refine.onnx (the graph divides by max_depth_m itself)",
+        },
+        "graphs": graphs,
+        "training": {"profile": profile.to_dict(), **(extra or {}).get("training", {})},
+        "validation": (extra or {}).get("validation", {}),
+        "software": {
+            "dear_train": dear_train.__version__,
+            "torch": torch.__version__,
+            "onnx": onnx.__version__,
+            "python": platform.python_version(),
+        },
+    }
+    (out / "model.json").write_text(json.dumps(manifest, indent=2) + "\n")
+    return manifest
+
+
+def _at_vga(inputs: tuple) -> tuple:
+    """Zero inputs with the channels of ``inputs`` at 480×640 (for the MAC count)."""
+    return tuple(torch.zeros(x.shape[0], x.shape[1], 480, 640) for x in inputs)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(
+        prog="dear-export", description="Export a trained DEAR checkpoint to a model bundle."
+    )
+    p.add_argument("--checkpoint", type=Path, required=True, help="final.pt of a training run")
+    p.add_argument("--out", type=Path, required=True, help="bundle directory to write")
+    p.add_argument("--no-check", action="store_true", help="skip the onnxruntime comparison")
+    a = p.parse_args()
+    model, profile = load_model(a.checkpoint)
+    ckpt = load(a.checkpoint)
+    extra = {
+        "training": {"data": ckpt.get("data", []), "frames": ckpt.get("frames", {})},
+        "validation": ckpt.get("metrics", {}),
+    }
+    manifest = export_bundle(model, profile, a.out, extra, check=not a.no_check)
+    for name, g in manifest["graphs"].items():
+        chk = g.get("check", {}).get("max_abs_diff")
+        print(f"{a.out / g['file']}: {g['bytes']} bytes, sha256 {g['sha256'][:12]}…, "
+              f"max |onnx - torch| = {chk}")
+    print(a.out / "model.json")
+
+
+if __name__ == "__main__":
+    main()

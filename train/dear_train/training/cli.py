@@ -1,0 +1,57 @@
+"""``dear-train``: train the DEAR networks on capture directories.
+
+Examples::
+
+    dear-train --profile smoke --data CAPTURE --out runs/smoke
+    dear-train --profile cpu --data DATASET/train --out runs/cpu           # edge tier, 2 cores
+    torchrun --nproc_per_node=4 -m dear_train.training.cli --profile gpu --data D --out runs/gpu
+    dear-train --profile cpu --data D --out runs/cpu --resume              # continue a run
+    dear-train --profile smoke --synthetic --out runs/smoke                # no data needed
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from dear_train.models import TIERS, VARIANTS
+from dear_train.training.config import PROFILES, get_profile
+from dear_train.training.trainer import Trainer
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(
+        prog="dear-train", description=__doc__.splitlines()[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__.split("\n", 2)[2],
+    )
+    p.add_argument("--profile", choices=sorted(PROFILES), default="smoke")
+    p.add_argument("--data", type=Path, nargs="+", help="capture directories")
+    p.add_argument(
+        "--synthetic",
+        action="store_true",
+        help="generate a tiny synthetic capture under OUT/synthetic and train on it",
+    )
+    p.add_argument("--out", type=Path, required=True, help="run directory")
+    p.add_argument("--tier", choices=TIERS, default=None, help="override the profile's tier")
+    p.add_argument("--variant", choices=VARIANTS, default=None, help="refinement variant")
+    p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: auto)")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoints/last.pt")
+    a = p.parse_args(argv)
+    if not a.data and not a.synthetic:
+        p.error("give --data CAPTURE_DIR... or --synthetic")
+    data = list(a.data or [])
+    if a.synthetic:
+        from dear_train.data.synthetic import write_synthetic_capture
+
+        syn = a.out / "synthetic"
+        if not (syn / "capture.json").exists():
+            write_synthetic_capture(syn, frames=8)
+        data.append(syn)
+    profile = get_profile(a.profile, tier=a.tier, variant=a.variant)
+    metrics = Trainer(profile, data, a.out, a.device, a.resume).run()
+    print(json.dumps({"out": str(a.out), "final_validation": metrics}, indent=2))
+
+
+if __name__ == "__main__":
+    main()

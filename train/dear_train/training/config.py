@@ -1,0 +1,137 @@
+"""Training profiles and the staged schedule.
+
+The paper's schedule (DESIGN.md step 10): FlowNetC alone → FlowNetC + fusion; ToF-KPN in
+parallel (independent of the flow stages, here run after them in the same process); then an
+end-to-end fine-tune. Each stage has its own epochs and learning rate; the learning rate is
+multiplied by ``lr_decay`` every ``lr_decay_every`` epochs.
+
+Profiles:
+
+- ``smoke``: seconds on a laptop; exercises every stage, checkpointing and export (the tests
+  run it). Not a useful model.
+- ``cpu``: the edge tier at 192×256 crops, sized for a 2-core machine (see README for the
+  measured step time this was sized from).
+- ``gpu``: the paper's recipe: paper tier, Adam, batch 3, crops 384×512, lr 4e-4 (1e-5 for the
+  fine-tune), ×0.7 every 2 epochs; 20 + 20 + 40 + 10 epochs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, replace
+
+from dear_train.augmentation import AugmentConfig
+from dear_train.data.dataset import Normalisation
+
+#: Stage names, in the order they run. ``flow``: the flow net alone (L_rough); ``fusion``:
+#: flow + fusion nets (L_rough + L_refn); ``refine``: the refinement net on inputs warped with
+#: the ground-truth flow (L_depth); ``finetune``: everything end to end (sum of the three).
+STAGES = ("flow", "fusion", "refine", "finetune")
+
+
+@dataclass(frozen=True)
+class Stage:
+    name: str
+    epochs: int
+    lr: float
+
+    def __post_init__(self) -> None:
+        if self.name not in STAGES:
+            raise ValueError(f"unknown stage {self.name!r}; choose from {', '.join(STAGES)}")
+
+
+@dataclass(frozen=True)
+class Profile:
+    """Everything that defines a training run (recorded in checkpoints and ``model.json``)."""
+
+    name: str
+    tier: str
+    variant: str = "kpn"
+    crop: tuple[int, int] = (384, 512)
+    batch_size: int = 3
+    stages: tuple[Stage, ...] = ()
+    lr_decay: float = 0.7
+    lr_decay_every: int = 2
+    #: Cap on optimiser steps per epoch (``None`` = the whole training set); lets a profile
+    #: fit a time budget independently of the dataset size.
+    max_steps_per_epoch: int | None = None
+    val_fraction: float = 0.1
+    #: Cap on validation batches per epoch.
+    max_val_batches: int | None = None
+    num_workers: int = 2
+    seed: int = 0
+    augment: AugmentConfig = field(default_factory=AugmentConfig)
+    norm: Normalisation = field(default_factory=Normalisation)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["crop"] = list(self.crop)
+        return d
+
+    @staticmethod
+    def from_dict(d: dict) -> Profile:
+        return Profile(
+            **{
+                **d,
+                "crop": tuple(d["crop"]),
+                "stages": tuple(Stage(**s) for s in d["stages"]),
+                "augment": AugmentConfig(**d["augment"]),
+                "norm": Normalisation(**d["norm"]),
+            }
+        )
+
+
+PROFILES: dict[str, Profile] = {
+    "smoke": Profile(
+        name="smoke",
+        tier="edge",
+        crop=(64, 96),
+        batch_size=2,
+        stages=(
+            Stage("flow", 1, 1e-3),
+            Stage("fusion", 1, 1e-3),
+            Stage("refine", 1, 1e-3),
+            Stage("finetune", 1, 1e-4),
+        ),
+        lr_decay_every=1,
+        max_steps_per_epoch=2,
+        max_val_batches=1,
+        val_fraction=0.25,
+        num_workers=0,
+    ),
+    "cpu": Profile(
+        name="cpu",
+        tier="edge",
+        crop=(192, 256),
+        batch_size=4,
+        stages=(
+            Stage("flow", 8, 1e-3),
+            Stage("fusion", 4, 5e-4),
+            Stage("refine", 8, 1e-3),
+            Stage("finetune", 2, 5e-5),
+        ),
+        max_steps_per_epoch=100,
+        max_val_batches=20,
+        num_workers=1,
+    ),
+    "gpu": Profile(
+        name="gpu",
+        tier="paper",
+        crop=(384, 512),
+        batch_size=3,
+        stages=(
+            Stage("flow", 20, 4e-4),
+            Stage("fusion", 20, 4e-4),
+            Stage("refine", 40, 4e-4),
+            Stage("finetune", 10, 1e-5),
+        ),
+        num_workers=6,
+    ),
+}
+
+
+def get_profile(name: str, **overrides: object) -> Profile:
+    """A named profile with optional field overrides (``tier``, ``variant``, ...)."""
+    if name not in PROFILES:
+        raise ValueError(f"unknown profile {name!r}; choose from {', '.join(PROFILES)}")
+    clean = {k: v for k, v in overrides.items() if v is not None}
+    return replace(PROFILES[name], **clean)

@@ -1,0 +1,275 @@
+"""The staged trainer: runs a profile's stages with checkpoints, resume, curves and DDP."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import torch
+from torch import nn
+from torch.nn.parallel import DistributedDataParallel
+from torch.utils.data import DataLoader, DistributedSampler
+from tqdm import tqdm
+
+from dear_train.data.dataset import DearDataset, split_items
+from dear_train.evaluation import evaluate
+from dear_train.losses import (
+    FUSION_WEIGHTS,
+    GRADIENT_WEIGHT,
+    depth_l2_loss,
+    depth_loss,
+    flownet_weights,
+    multiscale_flow_loss,
+)
+from dear_train.models.dear import DEAR
+from dear_train.training import distributed
+from dear_train.training.checkpoint import build_model, load, save_atomic
+from dear_train.training.config import Profile
+from dear_train.training.curves import plot_history
+
+
+def stage_modules(model: DEAR, stage: str) -> list[nn.Module]:
+    """The nets a stage trains."""
+    parts = {
+        "flow": [model.flow],
+        "fusion": [model.flow, model.fusion],
+        "refine": [model.refine],
+        "finetune": [model.flow, model.fusion, model.refine],
+    }[stage]
+    return [m for m in parts if m is not None]
+
+
+class StageLoss(nn.Module):
+    """``forward(batch)`` → (total loss, named parts) for one stage.
+
+    A module (not a function) so that ``DistributedDataParallel`` can wrap it: DDP hooks
+    ``forward``, and ``find_unused_parameters`` covers the nets a stage leaves alone.
+    """
+
+    def __init__(self, model: DEAR, stage: str, variant: str) -> None:
+        super().__init__()
+        self.model = model
+        self.stage = stage
+        self.variant = variant
+
+    def _depth(self, pred: torch.Tensor, gt: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
+        if self.variant == "deeptof":
+            return depth_l2_loss(pred, gt, valid)
+        lam = 0.0 if self.variant == "nograd" else GRADIENT_WEIGHT
+        return depth_loss(pred, gt, valid, lam)
+
+    def forward(self, b: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
+        m = self.model
+        rgb, amp, tof = b["rgb"], b["amplitude"], b["tof_depth"]
+        gt_flow, valid, gt = b["flow"], b["flow_valid"], b["gt_depth"]
+        depth_valid = valid & (gt > 0)
+        parts: dict[str, torch.Tensor] = {}
+        if self.stage == "refine":
+            r = m.refine_depth(rgb, amp, tof, gt_flow)
+            parts["depth"] = self._depth(r["depth"], gt, depth_valid)
+        else:
+            assert m.flow is not None
+            if self.stage == "flow":
+                flows = m.flow(rgb, amp)
+                parts["rough"] = multiscale_flow_loss(
+                    flows, gt_flow, valid, flownet_weights(len(flows))
+                )
+            else:
+                out = m.forward(rgb, amp, tof) if self.stage == "finetune" else m.align(rgb, amp, tof)
+                flows = out["flows_rough"]
+                assert isinstance(flows, list)
+                parts["rough"] = multiscale_flow_loss(
+                    flows, gt_flow, valid, flownet_weights(len(flows))
+                )
+                refn = out["flows_refn"]
+                assert isinstance(refn, list)
+                parts["refn"] = multiscale_flow_loss(refn, gt_flow, valid, FUSION_WEIGHTS)
+                if self.stage == "finetune":
+                    d = out["depth"]
+                    assert isinstance(d, torch.Tensor)
+                    parts["depth"] = self._depth(d, gt, depth_valid)
+        total = sum(parts.values(), torch.zeros((), device=rgb.device))
+        return total, {k: float(v.detach()) for k, v in parts.items()}
+
+
+class Trainer:
+    """Trains a :class:`Profile` on capture directories into ``out_dir``.
+
+    Output: ``checkpoints/last.pt`` (resume), ``checkpoints/stage-NAME.pt`` (end of each stage),
+    ``final.pt``, ``history.json``, ``curves.png``.
+    """
+
+    def __init__(
+        self,
+        profile: Profile,
+        data: list[Path],
+        out_dir: Path,
+        device: str | None = None,
+        resume: bool = False,
+    ) -> None:
+        self.profile = profile
+        self.data = [Path(d) for d in data]
+        self.out = Path(out_dir)
+        self.dist = distributed.init_from_env()
+        self.device = distributed.device_for(self.dist, device)
+        torch.manual_seed(profile.seed + self.dist.rank)
+        full = DearDataset(self.data, profile.crop, profile.augment, profile.norm, profile.seed)
+        train_items, val_items = split_items(full, profile.val_fraction, profile.seed)
+        self.skipped = full.skipped
+        self.train_set = DearDataset(
+            self.data, profile.crop, profile.augment, profile.norm, profile.seed, train_items
+        )
+        # Validation: fixed misalignments (seed/epoch constant), centred crops of the same size.
+        self.val_set = DearDataset(
+            self.data, profile.crop, profile.augment, profile.norm, profile.seed + 1, val_items
+        )
+        self.model = build_model(profile).to(self.device)
+        self.history: list[dict] = []
+        self.position = (0, 0)  # (stage index, next epoch)
+        self.resume_state: dict | None = None
+        last = self.out / "checkpoints" / "last.pt"
+        if resume and last.exists():
+            ckpt = load(last)
+            if ckpt["profile"] != profile.to_dict():
+                raise ValueError(f"{last}: was written by a different profile; use a new --out")
+            self.model.load_state_dict(ckpt["model"])
+            self.history = ckpt["history"]
+            self.position = (ckpt["stage_index"], ckpt["next_epoch"])
+            self.resume_state = ckpt
+
+    def _loader(self, dataset: DearDataset, shuffle: bool) -> DataLoader:
+        sampler = (
+            DistributedSampler(dataset, shuffle=shuffle, seed=self.profile.seed)
+            if self.dist.enabled
+            else None
+        )
+        return DataLoader(
+            dataset,
+            batch_size=self.profile.batch_size,
+            shuffle=shuffle and sampler is None,
+            sampler=sampler,
+            num_workers=self.profile.num_workers,
+            drop_last=shuffle and len(dataset) >= self.profile.batch_size,
+            persistent_workers=False,
+        )
+
+    def _save(self, path: Path, stage_index: int, next_epoch: int, opt: dict, sched: dict) -> None:
+        if not self.dist.is_main:
+            return
+        save_atomic(
+            {
+                "profile": self.profile.to_dict(),
+                "data": [str(d) for d in self.data],
+                "model": self.model.state_dict(),
+                "stage_index": stage_index,
+                "next_epoch": next_epoch,
+                "optimizer": opt,
+                "scheduler": sched,
+                "history": self.history,
+            },
+            path,
+        )
+
+    def run(self) -> dict[str, float]:
+        """Run (or resume) the schedule; returns the final validation metrics."""
+        p = self.profile
+        main = self.dist.is_main
+        start_stage, start_epoch = self.position
+        for si in range(start_stage, len(p.stages)):
+            stage = p.stages[si]
+            modules = stage_modules(self.model, stage.name)
+            for mod in (self.model.flow, self.model.fusion, self.model.refine):
+                if mod is not None:
+                    mod.requires_grad_(any(mod is x for x in modules))
+            params = [q for mod in modules for q in mod.parameters()]
+            opt = torch.optim.Adam(params, lr=stage.lr)
+            sched = torch.optim.lr_scheduler.StepLR(opt, p.lr_decay_every, p.lr_decay)
+            first_epoch = start_epoch if si == start_stage else 0
+            if self.resume_state is not None and si == start_stage and first_epoch > 0:
+                opt.load_state_dict(self.resume_state["optimizer"])
+                sched.load_state_dict(self.resume_state["scheduler"])
+            loss_mod: nn.Module = StageLoss(self.model, stage.name, p.variant)
+            if self.dist.enabled:
+                loss_mod = DistributedDataParallel(loss_mod, find_unused_parameters=True)
+            loader = self._loader(self.train_set, shuffle=True)
+            for epoch in range(first_epoch, stage.epochs):
+                self.train_set.set_epoch(epoch + 1000 * si)
+                if isinstance(loader.sampler, DistributedSampler):
+                    loader.sampler.set_epoch(epoch + 1000 * si)
+                self.model.train()
+                total, steps, t0 = 0.0, 0, time.time()
+                limit = p.max_steps_per_epoch or len(loader)
+                bar = tqdm(
+                    loader,
+                    total=min(limit, len(loader)),
+                    desc=f"{stage.name} {epoch + 1}/{stage.epochs}",
+                    disable=not main,
+                    leave=False,
+                )
+                for batch in bar:
+                    if steps >= limit:
+                        break
+                    b = {k: v.to(self.device, non_blocking=True) for k, v in batch.items()}
+                    loss, parts = loss_mod(b)
+                    opt.zero_grad(set_to_none=True)
+                    loss.backward()
+                    opt.step()
+                    total += float(loss.detach())
+                    steps += 1
+                    bar.set_postfix(
+                        loss=f"{float(loss.detach()):.4g}", **{k: f"{v:.3g}" for k, v in parts.items()}
+                    )
+                sched.step()
+                train_loss = distributed.mean_across_ranks(total / max(steps, 1), self.dist, self.device)
+                val = {}
+                if main:
+                    val = evaluate(
+                        self.model,
+                        self._loader(self.val_set, shuffle=False),
+                        self.device,
+                        p.max_val_batches,
+                    )
+                entry = {
+                    "stage": stage.name,
+                    "epoch": epoch,
+                    "steps": steps,
+                    "seconds": round(time.time() - t0, 2),
+                    "lr": opt.param_groups[0]["lr"],
+                    "train_loss": train_loss,
+                    "val": val,
+                }
+                self.history.append(entry)
+                if main:
+                    tqdm.write(json.dumps(entry))
+                    self._save(
+                        self.out / "checkpoints" / "last.pt",
+                        si if epoch + 1 < stage.epochs else si + 1,
+                        epoch + 1 if epoch + 1 < stage.epochs else 0,
+                        opt.state_dict(),
+                        sched.state_dict(),
+                    )
+                    plot_history(self.history, self.out / "curves.png")
+                    (self.out / "history.json").write_text(json.dumps(self.history, indent=1))
+            if main:
+                self._save(self.out / "checkpoints" / f"stage-{stage.name}.pt", si + 1, 0, {}, {})
+            distributed.barrier(self.dist)
+        final = self.history[-1]["val"] if self.history else {}
+        if main:
+            save_atomic(
+                {
+                    "profile": self.profile.to_dict(),
+                    "data": [str(d) for d in self.data],
+                    "frames": {
+                        "train": len(self.train_set),
+                        "val": len(self.val_set),
+                        "skipped": self.skipped,
+                    },
+                    "model": self.model.state_dict(),
+                    "metrics": final,
+                    "history": self.history,
+                },
+                self.out / "final.pt",
+            )
+        distributed.shutdown(self.dist)
+        return final
