@@ -5,6 +5,7 @@
 //! - [`frame`]: in-memory images of one RGB-D frame;
 //! - [`capture`]: the capture-directory format (read, validate, write);
 //! - [`geometry`]: warping, least-squares calibration, depth↔flow, forward splatting;
+//! - [`metrics`]: AEPE and the paper's quantile-split depth MAE;
 //! - [`filter`]: the classical edge-aware refinement baseline.
 
 pub mod align;
@@ -13,6 +14,7 @@ pub mod capture;
 pub mod filter;
 pub mod frame;
 pub mod geometry;
+pub mod metrics;
 
 pub use calibration::Calibration;
 pub use frame::{Flow, RgbdFrame};
