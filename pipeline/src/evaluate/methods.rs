@@ -1,0 +1,129 @@
+//! The methods an evaluation compares. Every one is a configuration of code the daemon runs.
+
+use std::time::Instant;
+
+use ndarray::Array2;
+
+use crate::align::StaticAligner;
+use crate::crossmodal::{estimate_calibration_or, EdgeMatchParams};
+use crate::filter::ClassicalRefiner;
+use crate::frame::Flow;
+use crate::{Calibration, RgbdFrame};
+
+/// One row of the comparison.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// The ToF depth as delivered (no alignment, no refinement): the input.
+    RawTof,
+    /// Aligned with the static (factory) calibration.
+    StaticCalibration,
+    /// Static calibration + the classical edge-aware filter (the daemon without a model).
+    StaticClassical,
+    /// Calibration estimated per frame by classical RGB↔amplitude edge matching + robust LS.
+    EdgeMatching,
+    /// Edge matching + the classical filter.
+    EdgeMatchingClassical,
+    /// Aligned with the frame's *true* calibration (an upper bound for alignment, needs the
+    /// capture's per-frame `perturbation`).
+    OracleCalibration,
+}
+
+impl Method {
+    /// Every classical method, in table order.
+    pub const CLASSICAL: [Method; 6] = [
+        Method::RawTof,
+        Method::StaticCalibration,
+        Method::StaticClassical,
+        Method::EdgeMatching,
+        Method::EdgeMatchingClassical,
+        Method::OracleCalibration,
+    ];
+
+    /// Stable name used in tables and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::RawTof => "raw-tof",
+            Method::StaticCalibration => "static-calibration",
+            Method::StaticClassical => "static+classical-filter",
+            Method::EdgeMatching => "edge-matching",
+            Method::EdgeMatchingClassical => "edge-matching+classical-filter",
+            Method::OracleCalibration => "oracle-calibration",
+        }
+    }
+}
+
+/// What a method produced for one frame.
+#[derive(Debug, Clone)]
+pub struct MethodOutput {
+    /// Depth on the RGB grid, metres, 0 = invalid.
+    pub depth: Array2<f32>,
+    /// The RGB→ToF flow the method aligned with, when it has one.
+    pub flow: Option<Flow>,
+    /// The calibration it used, when it has one.
+    pub calibration: Option<Calibration>,
+    /// Wall time of the method on this frame, seconds.
+    pub seconds: f64,
+}
+
+/// Runs methods over frames, keeping scratch buffers between frames.
+pub struct MethodRunner {
+    initial: Calibration,
+    aligner: StaticAligner,
+    refiner: ClassicalRefiner,
+    edge_params: EdgeMatchParams,
+}
+
+impl MethodRunner {
+    /// A runner for `(height, width)` frames whose factory calibration is `initial`.
+    pub fn new(height: usize, width: usize, initial: Calibration) -> Self {
+        MethodRunner {
+            initial,
+            aligner: StaticAligner::new(height, width),
+            refiner: ClassicalRefiner::default(),
+            edge_params: EdgeMatchParams::default(),
+        }
+    }
+
+    /// Runs `method` on `frame`. `None` when the method cannot apply (the oracle without a
+    /// known perturbation).
+    pub fn run(&mut self, method: Method, frame: &RgbdFrame) -> Option<MethodOutput> {
+        let start = Instant::now();
+        let (calibration, refine) = match method {
+            Method::RawTof => {
+                return Some(MethodOutput {
+                    depth: frame.depth.clone(),
+                    flow: None,
+                    calibration: None,
+                    seconds: start.elapsed().as_secs_f64(),
+                })
+            }
+            Method::StaticCalibration => (self.initial, false),
+            Method::StaticClassical => (self.initial, true),
+            Method::EdgeMatching | Method::EdgeMatchingClassical => {
+                let c = estimate_calibration_or(
+                    frame.rgb.view(),
+                    frame.amplitude.view(),
+                    frame.depth.view(),
+                    &self.edge_params,
+                    self.initial,
+                );
+                (c, method == Method::EdgeMatchingClassical)
+            }
+            Method::OracleCalibration => (frame.perturbation?, false),
+        };
+        let mut aligned = Array2::zeros(frame.dim());
+        self.aligner
+            .align_into(frame.depth.view(), &calibration, aligned.view_mut());
+        let depth = if refine {
+            self.refiner.refine(aligned.view(), frame.rgb.view()).0
+        } else {
+            aligned
+        };
+        Some(MethodOutput {
+            depth,
+            flow: Some(self.aligner.flow().clone()),
+            calibration: Some(calibration),
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+}

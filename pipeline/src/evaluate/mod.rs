@@ -1,0 +1,49 @@
+//! Evaluation of alignment and refinement methods on captures with ground truth: the engine
+//! behind `dear eval`. Each [`Method`] runs the same `dear-pipeline` code the daemon runs; the
+//! [`Evaluation`] accumulates the paper's metrics per method, with the time each method took,
+//! so accuracy and cost come from one run.
+
+pub mod methods;
+pub mod report;
+
+pub use methods::{Method, MethodOutput, MethodRunner};
+pub use report::{Evaluation, MethodReport};
+
+use ndarray::{Array2, Zip};
+
+use crate::capture::flo::UNKNOWN_FLOW;
+use crate::RgbdFrame;
+
+/// Why a frame cannot be evaluated.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum EvalError {
+    #[error(
+        "frame {frame} has no ground-truth depth (frames/{frame:06}.gt.png); evaluation needs it"
+    )]
+    NoGroundTruth { frame: u64 },
+}
+
+/// Pixels where the ground truth is usable: valid gt depth, the mask (when present), and a
+/// known ground-truth flow (when present).
+pub fn ground_truth_mask(frame: &RgbdFrame) -> Result<Array2<bool>, EvalError> {
+    let gt = frame
+        .gt_depth
+        .as_ref()
+        .ok_or(EvalError::NoGroundTruth { frame: frame.index })?;
+    let mut valid = gt.mapv(|z| z > 0.0 && z.is_finite());
+    if let Some(mask) = &frame.mask {
+        Zip::from(&mut valid).and(mask).for_each(|v, &m| *v &= m);
+    }
+    if let Some(flow) = &frame.flow {
+        Zip::from(&mut valid)
+            .and(&flow.u)
+            .and(&flow.v)
+            .for_each(|v, &u, &w| {
+                *v &= u.is_finite()
+                    && w.is_finite()
+                    && u.abs() < UNKNOWN_FLOW / 10.0
+                    && w.abs() < UNKNOWN_FLOW / 10.0;
+            });
+    }
+    Ok(valid)
+}
