@@ -6,7 +6,10 @@
 //! - [`capture`]: the capture-directory format (read, validate, write);
 //! - [`geometry`]: warping, least-squares calibration, depth↔flow, forward splatting;
 //! - [`metrics`]: AEPE and the paper's quantile-split depth MAE;
-//! - [`filter`]: the classical edge-aware refinement baseline.
+//! - [`filter`]: the classical edge-aware refinement baseline;
+//! - [`model`]: model bundles (ONNX graphs + manifest) run by tract (feature `inference`);
+//! - [`dear`]: the paper's per-frame chain of networks and geometry (feature `inference`);
+//! - [`online`]: online re-estimation of the drifting calibration.
 
 pub mod align;
 pub mod calibration;
@@ -15,6 +18,11 @@ pub mod filter;
 pub mod frame;
 pub mod geometry;
 pub mod metrics;
+#[cfg(feature = "inference")]
+pub mod model;
+#[cfg(feature = "inference")]
+pub mod dear;
+pub mod online;
 
 pub use calibration::Calibration;
 pub use frame::{Flow, RgbdFrame};

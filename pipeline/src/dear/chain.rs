@@ -1,0 +1,500 @@
+//! The paper's per-frame chain (DESIGN.md, "The algorithm", steps 1–8) around the three graphs
+//! of a bundle, writing its result into caller-provided views (the daemon passes views of
+//! shared memory, so the published frame is never copied).
+//!
+//! `Full` mode is the paper: every frame runs the rough-flow network and re-solves the
+//! calibration. `Cached(calibration)` is the on-device shortcut between network runs: the flow
+//! is built from a known calibration and the depth itself ([`StaticAligner`]'s fixed point),
+//! and — by default, see [`CachedFusion`] — the fusion network is skipped too.
+
+use std::time::{Duration, Instant};
+
+use ndarray::{Array2, ArrayView2, ArrayView3, ArrayViewMut2, Zip};
+
+use crate::align::StaticAligner;
+use crate::calibration::Calibration;
+use crate::dear::confidence::confidence_into;
+use crate::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
+use crate::frame::Flow;
+use crate::geometry::surface::is_valid_depth;
+use crate::geometry::{warp_bilinear, warp_depth, LsqError, RobustOptions};
+use crate::model::{BundleError, BundleRunner, ModelBundle, Normalisation, RunnerOptions};
+use crate::online::residual::edge_disagreement;
+use crate::online::Measurement;
+
+/// How one frame is aligned.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ChainMode {
+    /// Rough-flow network and least-squares calibration on this frame (the paper).
+    Full,
+    /// Skip the rough-flow network: the flow comes from this calibration and the depth.
+    Cached(Calibration),
+}
+
+/// What `Cached` mode does about the fusion network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CachedFusion {
+    /// Warp with `W_convt` directly (no network at all in the alignment). The default: the
+    /// fusion net was trained to correct a *network* flow with the calibration flow; fed the
+    /// calibration flow twice it has nothing to arbitrate, costs more than the flow net on the
+    /// edge tier, and measured no better (see the crate's report in `benches/dear_chain.rs`).
+    Skip,
+    /// Run fusion with `W_rough := W_convt`.
+    Run,
+}
+
+/// Settings of a [`DearChain`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChainOptions {
+    /// The robust least squares of `Full` mode.
+    pub robust: RobustOptions,
+    /// Flow vectors with an end-point residual above this (px) count as outliers in the
+    /// reported inlier fraction.
+    pub inlier_threshold_px: f32,
+    /// `Cached` mode and the fusion network.
+    pub cached_fusion: CachedFusion,
+    /// Compute [`ChainReport::alignment_residual`] (a few ms at VGA).
+    pub alignment_residual: bool,
+    /// tract execution.
+    pub runner: RunnerOptions,
+}
+
+impl Default for ChainOptions {
+    /// Huber δ = 1 px, outliers beyond 3 px, fusion skipped in `Cached` mode, residual on.
+    fn default() -> Self {
+        ChainOptions {
+            robust: RobustOptions::default(),
+            inlier_threshold_px: 3.0,
+            cached_fusion: CachedFusion::Skip,
+            alignment_residual: true,
+            runner: RunnerOptions::default(),
+        }
+    }
+}
+
+/// One frame's sensor data; all on the RGB pixel grid's size `(H, W)`.
+#[derive(Debug, Clone, Copy)]
+pub struct ChainInput<'a> {
+    /// RGB `(H, W, 3)`, 8-bit.
+    pub rgb: ArrayView3<'a, u8>,
+    /// Raw ToF amplitude `(H, W)` (sensor counts).
+    pub amplitude: ArrayView2<'a, f32>,
+    /// ToF depth `(H, W)`, metres, `0` = invalid, as delivered (weakly calibrated).
+    pub depth: ArrayView2<'a, f32>,
+}
+
+/// Where the chain writes its result.
+#[derive(Debug)]
+pub struct ChainOutput<'a> {
+    /// Aligned refined depth `(H, W)`, metres; `0` where no ToF measurement maps to the pixel.
+    pub depth: ArrayViewMut2<'a, f32>,
+    /// Confidence `(H, W)`, 0..=255 (see [`crate::dear::confidence`]).
+    pub confidence: ArrayViewMut2<'a, u8>,
+}
+
+/// Wall time of each stage of one frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StageTimings {
+    /// Amplitude normalisation and RGB planes.
+    pub preprocess: Duration,
+    /// Rough-flow network (zero in `Cached` mode).
+    pub flow: Duration,
+    /// `D_rgb`, least squares and `W_convt` (`Full`), or the fixed-point alignment (`Cached`).
+    pub calibrate: Duration,
+    /// Fusion network (zero when skipped).
+    pub fuse: Duration,
+    /// Warping depth and amplitude with the final flow.
+    pub warp: Duration,
+    /// Refinement network, output masking and confidence.
+    pub refine: Duration,
+    /// The alignment residual (zero when off).
+    pub residual: Duration,
+}
+
+impl StageTimings {
+    /// Sum of the stages.
+    pub fn total(&self) -> Duration {
+        self.preprocess
+            + self.flow
+            + self.calibrate
+            + self.fuse
+            + self.warp
+            + self.refine
+            + self.residual
+    }
+}
+
+/// What happened on one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChainReport {
+    /// Whether the rough-flow network ran (`Full` mode).
+    pub ran_flow_network: bool,
+    /// Whether the fusion network ran.
+    pub ran_fusion_network: bool,
+    /// The calibration behind `W_convt`: the fit (`Full`, when it succeeded) or the given one.
+    pub calibration: Option<Calibration>,
+    /// `Full` mode: the robust fit of `W_rough` against `D_rgb` and its quality, or why it
+    /// failed (then `W_convt = W_rough` everywhere). `None` in `Cached` mode.
+    pub measurement: Option<Result<Measurement, LsqError>>,
+    /// Fraction of pixels with a valid warped depth.
+    pub valid_fraction: f32,
+    /// The amplitude normalisation scale (`None`: no valid depth, amplitude input all zero).
+    pub amplitude_scale: Option<f32>,
+    /// Edge disagreement between RGB and the warped amplitude (see
+    /// [`edge_disagreement`]); the online estimator's trigger signal.
+    pub alignment_residual: Option<f32>,
+    /// Stage timings.
+    pub timings: StageTimings,
+}
+
+/// Why a frame could not be processed.
+#[derive(Debug, thiserror::Error)]
+pub enum ChainError {
+    /// An input or output image does not have the chain's shape.
+    #[error("{what} has shape {found:?}, the chain runs at {expected:?}")]
+    Shape {
+        /// Which image.
+        what: &'static str,
+        /// The chain's `(H, W)` (`(H, W, 3)` for RGB).
+        expected: Vec<usize>,
+        /// What was passed.
+        found: Vec<usize>,
+    },
+    /// A network failed.
+    #[error(transparent)]
+    Model(#[from] BundleError),
+}
+
+/// The DEAR chain for one stream resolution, with every intermediate buffer preallocated.
+#[derive(Debug)]
+pub struct DearChain {
+    runner: BundleRunner,
+    norm: Normalisation,
+    options: ChainOptions,
+    aligner: StaticAligner,
+    scratch: Vec<f32>,
+    rgb: [Array2<f32>; 3],
+    amplitude: Array2<f32>,
+    flow_rough: Flow,
+    depth_rgb: Array2<f32>,
+    flow_convt: Flow,
+    flow_refined: Flow,
+    depth_warped: Array2<f32>,
+    amplitude_warped: Array2<f32>,
+    refined: Array2<f32>,
+}
+
+impl DearChain {
+    /// A chain running `bundle` on `width × height` frames with default options.
+    ///
+    /// # Errors
+    /// As [`BundleRunner::new`].
+    pub fn new(bundle: &ModelBundle, width: usize, height: usize) -> Result<Self, BundleError> {
+        Self::with_options(bundle, width, height, ChainOptions::default())
+    }
+
+    /// [`new`](Self::new) with explicit options.
+    ///
+    /// # Errors
+    /// As [`BundleRunner::with_options`].
+    pub fn with_options(
+        bundle: &ModelBundle,
+        width: usize,
+        height: usize,
+        options: ChainOptions,
+    ) -> Result<Self, BundleError> {
+        let runner = BundleRunner::with_options(bundle, width, height, options.runner)?;
+        let plane = || Array2::zeros((height, width));
+        let flow = || Flow::zeros(height, width);
+        Ok(DearChain {
+            runner,
+            norm: bundle.normalisation(),
+            options,
+            aligner: StaticAligner::new(height, width),
+            scratch: Vec::with_capacity(height * width),
+            rgb: [plane(), plane(), plane()],
+            amplitude: plane(),
+            flow_rough: flow(),
+            depth_rgb: plane(),
+            flow_convt: flow(),
+            flow_refined: flow(),
+            depth_warped: plane(),
+            amplitude_warped: plane(),
+            refined: plane(),
+        })
+    }
+
+    /// `(height, width)` of the stream.
+    pub fn dim(&self) -> (usize, usize) {
+        self.runner.dim()
+    }
+
+    /// The options in use.
+    pub fn options(&self) -> &ChainOptions {
+        &self.options
+    }
+
+    /// Changes how `Cached` frames treat the fusion network.
+    pub fn set_cached_fusion(&mut self, cached_fusion: CachedFusion) {
+        self.options.cached_fusion = cached_fusion;
+    }
+
+    /// The graphs, for running a single network (tests, benches).
+    pub fn runner_mut(&mut self) -> &mut BundleRunner {
+        &mut self.runner
+    }
+
+    /// Processes one frame and writes the aligned refined depth and its confidence.
+    ///
+    /// # Errors
+    /// [`ChainError::Shape`] when an image does not have the chain's shape (nothing is
+    /// written), [`ChainError::Model`] when a network fails.
+    pub fn process(
+        &mut self,
+        input: ChainInput<'_>,
+        mode: ChainMode,
+        output: ChainOutput<'_>,
+    ) -> Result<ChainReport, ChainError> {
+        self.check_shapes(&input, &output)?;
+        let mut t = StageTimings::default();
+        let mut clock = Instant::now();
+        let mut lap = |slot: &mut Duration| {
+            let now = Instant::now();
+            *slot = now - clock;
+            clock = now;
+        };
+
+        // 1. Preprocess.
+        rgb_planes_into(input.rgb, &mut self.rgb);
+        let amplitude_scale = normalize_amplitude_into(
+            input.amplitude,
+            input.depth,
+            self.norm.amplitude_percentile,
+            &mut self.scratch,
+            self.amplitude.view_mut(),
+        );
+        lap(&mut t.preprocess);
+
+        let mut measurement = None;
+        let calibration;
+        let ran_fusion;
+        match mode {
+            ChainMode::Full => {
+                // 2. Rough flow.
+                let [r, g, b] = &self.rgb;
+                self.runner.flow(
+                    [r.view(), g.view(), b.view()],
+                    self.amplitude.view(),
+                    &mut self.flow_rough,
+                )?;
+                lap(&mut t.flow);
+                // 3.–5. D_rgb, robust least squares, W_convt (W_rough where D_rgb is invalid).
+                warp_depth(input.depth, &self.flow_rough, self.depth_rgb.view_mut());
+                let fit = Measurement::from_flow(
+                    &self.flow_rough,
+                    self.depth_rgb.view(),
+                    self.options.robust,
+                    self.options.inlier_threshold_px,
+                );
+                calibration = fit.as_ref().ok().map(|m| m.calibration);
+                self.flow_convt.u.assign(&self.flow_rough.u);
+                self.flow_convt.v.assign(&self.flow_rough.v);
+                if let Some(c) = calibration {
+                    convt_flow_into(&c, self.depth_rgb.view(), &mut self.flow_convt);
+                }
+                measurement = Some(fit);
+                lap(&mut t.calibrate);
+                // 6. Fusion.
+                self.runner
+                    .fuse(&self.flow_rough, &self.flow_convt, &mut self.flow_refined)?;
+                ran_fusion = true;
+                lap(&mut t.fuse);
+                // 7. Warp depth and amplitude.
+                warp_depth(
+                    input.depth,
+                    &self.flow_refined,
+                    self.depth_warped.view_mut(),
+                );
+                warp_bilinear(
+                    self.amplitude.view(),
+                    &self.flow_refined,
+                    self.amplitude_warped.view_mut(),
+                    None,
+                );
+                lap(&mut t.warp);
+            }
+            ChainMode::Cached(c) => {
+                calibration = Some(c);
+                // W_convt from the calibration and the aligned depth (fixed point); its warp of
+                // D_tof is D_rgb.
+                self.aligner
+                    .align_into(input.depth, &c, self.depth_rgb.view_mut());
+                self.flow_convt.u.assign(&self.aligner.flow().u);
+                self.flow_convt.v.assign(&self.aligner.flow().v);
+                lap(&mut t.calibrate);
+                match self.options.cached_fusion {
+                    CachedFusion::Skip => {
+                        ran_fusion = false;
+                        self.depth_warped.assign(&self.depth_rgb);
+                        warp_bilinear(
+                            self.amplitude.view(),
+                            &self.flow_convt,
+                            self.amplitude_warped.view_mut(),
+                            None,
+                        );
+                        self.flow_refined.u.assign(&self.flow_convt.u);
+                        self.flow_refined.v.assign(&self.flow_convt.v);
+                        lap(&mut t.warp);
+                    }
+                    CachedFusion::Run => {
+                        self.runner.fuse(
+                            &self.flow_convt,
+                            &self.flow_convt,
+                            &mut self.flow_refined,
+                        )?;
+                        ran_fusion = true;
+                        lap(&mut t.fuse);
+                        warp_depth(
+                            input.depth,
+                            &self.flow_refined,
+                            self.depth_warped.view_mut(),
+                        );
+                        warp_bilinear(
+                            self.amplitude.view(),
+                            &self.flow_refined,
+                            self.amplitude_warped.view_mut(),
+                            None,
+                        );
+                        lap(&mut t.warp);
+                    }
+                }
+            }
+        }
+
+        // 8. Refinement, masking, confidence.
+        let [r, g, b] = &self.rgb;
+        let rgb = self
+            .runner
+            .refine_uses_rgb()
+            .then(|| [r.view(), g.view(), b.view()]);
+        self.runner.refine(
+            self.amplitude_warped.view(),
+            self.depth_warped.view(),
+            rgb,
+            self.refined.view_mut(),
+        )?;
+        let ChainOutput {
+            depth: mut out_depth,
+            confidence,
+        } = output;
+        let mut valid = 0usize;
+        Zip::from(&mut out_depth)
+            .and(&self.refined)
+            .and(&self.depth_warped)
+            .for_each(|o, &r, &z| {
+                let ok = is_valid_depth(z) && is_valid_depth(r);
+                *o = if ok { r } else { 0.0 };
+                valid += usize::from(is_valid_depth(z));
+            });
+        confidence_into(self.depth_warped.view(), self.refined.view(), confidence);
+        lap(&mut t.refine);
+
+        let alignment_residual = if self.options.alignment_residual {
+            let r = edge_disagreement(
+                input.rgb,
+                self.amplitude_warped.view(),
+                self.depth_warped.view(),
+            );
+            lap(&mut t.residual);
+            r
+        } else {
+            None
+        };
+        let (h, w) = self.dim();
+        Ok(ChainReport {
+            ran_flow_network: matches!(mode, ChainMode::Full),
+            ran_fusion_network: ran_fusion,
+            calibration,
+            measurement,
+            valid_fraction: valid as f32 / (h * w) as f32,
+            amplitude_scale,
+            alignment_residual,
+            timings: t,
+        })
+    }
+
+    fn check_shapes(
+        &self,
+        input: &ChainInput<'_>,
+        output: &ChainOutput<'_>,
+    ) -> Result<(), ChainError> {
+        let (h, w) = self.dim();
+        let check = |what: &'static str, found: &[usize], expected: &[usize]| {
+            if found == expected {
+                Ok(())
+            } else {
+                Err(ChainError::Shape {
+                    what,
+                    expected: expected.to_vec(),
+                    found: found.to_vec(),
+                })
+            }
+        };
+        check("rgb", input.rgb.shape(), &[h, w, 3])?;
+        check("amplitude", input.amplitude.shape(), &[h, w])?;
+        check("depth", input.depth.shape(), &[h, w])?;
+        check("output depth", output.depth.shape(), &[h, w])?;
+        check("output confidence", output.confidence.shape(), &[h, w])
+    }
+
+    /// RGB planes in `[0, 1]` of the last frame.
+    pub fn rgb_planes(&self) -> &[Array2<f32>; 3] {
+        &self.rgb
+    }
+    /// Normalised amplitude of the last frame (ToF grid).
+    pub fn amplitude(&self) -> &Array2<f32> {
+        &self.amplitude
+    }
+    /// `W_rough` of the last `Full` frame.
+    pub fn flow_rough(&self) -> &Flow {
+        &self.flow_rough
+    }
+    /// `D_rgb`: ToF depth warped by `W_rough` (`Full`) or aligned by the calibration (`Cached`).
+    pub fn depth_rgb(&self) -> &Array2<f32> {
+        &self.depth_rgb
+    }
+    /// `W_convt` of the last frame.
+    pub fn flow_convt(&self) -> &Flow {
+        &self.flow_convt
+    }
+    /// The flow the depth was finally warped with (`W_refn`, or `W_convt` when fusion was
+    /// skipped).
+    pub fn flow_refined(&self) -> &Flow {
+        &self.flow_refined
+    }
+    /// The refinement's depth input (metres).
+    pub fn depth_warped(&self) -> &Array2<f32> {
+        &self.depth_warped
+    }
+    /// The refinement's amplitude input.
+    pub fn amplitude_warped(&self) -> &Array2<f32> {
+        &self.amplitude_warped
+    }
+    /// The refinement's raw output (metres), before masking.
+    pub fn refined_raw(&self) -> &Array2<f32> {
+        &self.refined
+    }
+}
+
+/// `W_convt = t / D + c` where `D` is valid; leaves `flow` (holding `W_rough`) elsewhere.
+fn convt_flow_into(calib: &Calibration, depth: ArrayView2<f32>, flow: &mut Flow) {
+    Zip::from(&mut flow.u)
+        .and(&mut flow.v)
+        .and(&depth)
+        .par_for_each(|u, v, &z| {
+            if let Some((fu, fv)) = calib.flow_at(z) {
+                *u = fu;
+                *v = fv;
+            }
+        });
+}

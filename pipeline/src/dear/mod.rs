@@ -1,0 +1,16 @@
+//! The DEAR per-frame chain on device (feature `inference`): preprocessing, the three networks
+//! of a [`ModelBundle`](crate::model::ModelBundle) and the geometry between them, writing
+//! aligned refined depth and a confidence map into caller-provided views.
+//!
+//! - [`preprocess`]: amplitude and RGB normalisation as the bundle defines it;
+//! - [`chain`]: [`DearChain`], `Full` (the paper) and `Cached(calibration)` modes;
+//! - [`confidence`]: the published per-pixel confidence and its definition.
+
+pub mod chain;
+pub mod confidence;
+pub mod preprocess;
+
+pub use chain::{
+    CachedFusion, ChainError, ChainInput, ChainMode, ChainOptions, ChainOutput, ChainReport,
+    DearChain, StageTimings,
+};

@@ -1,0 +1,283 @@
+//! `model.json`, the manifest of a model bundle (written by `dear-export` in `train/`), and the
+//! I/O contract between the three graphs and the DEAR chain that feeds them.
+//!
+//! The manifest is parsed leniently where the exporter may add information (extra fields are
+//! kept or ignored) and strictly where the chain depends on it: the format and its version, the
+//! normalisation constants, the size multiple, and each graph's file, checksum and tensor names
+//! and channel counts.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::model::error::BundleError;
+
+/// The `format` field every bundle manifest carries.
+pub const BUNDLE_FORMAT: &str = "dear-model-bundle";
+/// The manifest version this crate reads.
+pub const BUNDLE_FORMAT_VERSION: u64 = 1;
+
+/// The parsed `model.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Always [`BUNDLE_FORMAT`].
+    pub format: String,
+    /// Always [`BUNDLE_FORMAT_VERSION`].
+    pub format_version: u64,
+    /// Model tier: `paper` or `edge`.
+    pub tier: String,
+    /// Refinement variant (`kpn`, `unet`, `norgb`, ...).
+    pub variant: String,
+    /// Network inputs must have height and width multiples of this; the runner pads.
+    pub input_size_multiple: usize,
+    /// Constants that turn sensor data into network inputs.
+    pub normalisation: Normalisation,
+    /// The graphs by role: `flow`, `fuse`, `refine`.
+    pub graphs: BTreeMap<String, GraphSpec>,
+    /// Training recipe, as recorded by the exporter (informational).
+    #[serde(default)]
+    pub training: serde_json::Value,
+    /// Measured metrics, as recorded by the exporter (informational).
+    #[serde(default)]
+    pub validation: serde_json::Value,
+    /// Versions of the exporting software (informational).
+    #[serde(default)]
+    pub software: serde_json::Value,
+}
+
+/// Normalisation constants (`normalisation` in `model.json`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Normalisation {
+    /// Depth scale of the refinement network, metres (applied inside `refine.onnx`).
+    pub max_depth_m: f32,
+    /// Percentile `p` of `I_raw·D²` over valid-depth pixels that maps to amplitude 1.
+    pub amplitude_percentile: f32,
+}
+
+/// One graph of the bundle.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GraphSpec {
+    /// File name inside the bundle directory (no directories).
+    pub file: String,
+    /// Graph inputs.
+    pub inputs: Vec<TensorSpec>,
+    /// Graph outputs.
+    pub outputs: Vec<TensorSpec>,
+    /// Lower-case hex SHA-256 of the file.
+    pub sha256: String,
+    /// File size in bytes.
+    pub bytes: u64,
+}
+
+/// One input or output tensor: its name and `[N, C, H, W]` shape (symbols or numbers).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TensorSpec {
+    /// Tensor name in the ONNX graph.
+    pub name: String,
+    /// Shape as written by the exporter, e.g. `["N", 3, "H", "W"]`.
+    pub shape: Vec<serde_json::Value>,
+}
+
+impl TensorSpec {
+    /// The channel count (`shape[1]`) when it is a number.
+    pub fn channels(&self) -> Option<usize> {
+        self.shape
+            .get(1)
+            .and_then(serde_json::Value::as_u64)
+            .map(|c| c as usize)
+    }
+}
+
+/// The roles of the three graphs, in the order the chain runs them.
+pub const GRAPH_ROLES: [&str; 3] = ["flow", "fuse", "refine"];
+
+/// What the chain feeds a graph and reads from it: `(name, channels, required)` per input and
+/// `(name, channels)` of the single output.
+pub(crate) struct Contract {
+    pub inputs: &'static [(&'static str, usize, bool)],
+    pub output: (&'static str, usize),
+}
+
+/// The I/O contract of each role (train/README.md, "Graph I/O contract").
+pub(crate) fn contract(role: &str) -> Option<Contract> {
+    match role {
+        "flow" => Some(Contract {
+            inputs: &[("rgb", 3, true), ("amplitude", 1, true)],
+            output: ("flow", 2),
+        }),
+        "fuse" => Some(Contract {
+            inputs: &[("flow_rough", 2, true), ("flow_convt", 2, true)],
+            output: ("flow_refined", 2),
+        }),
+        "refine" => Some(Contract {
+            inputs: &[
+                ("amplitude", 1, true),
+                ("depth", 1, true),
+                ("rgb", 3, false),
+            ],
+            output: ("depth_refined", 1),
+        }),
+        _ => None,
+    }
+}
+
+/// The role name as a `'static` string (for error values).
+pub(crate) fn static_role(role: &str) -> &'static str {
+    GRAPH_ROLES
+        .into_iter()
+        .find(|r| *r == role)
+        .unwrap_or("unknown")
+}
+
+impl Manifest {
+    /// Parses and validates `model.json` text; `path` is only used in error messages.
+    ///
+    /// # Errors
+    /// [`BundleError::Manifest`] for invalid JSON, a wrong format or version, a missing field,
+    /// a missing graph or a non-positive constant; [`BundleError::Contract`] when a graph's
+    /// declared inputs or outputs are not what the chain feeds and reads.
+    pub fn parse(text: &str, path: &Path) -> Result<Manifest, BundleError> {
+        let bad = |message: String| BundleError::Manifest {
+            path: path.to_path_buf(),
+            message,
+        };
+        let value: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| bad(format!("not valid JSON: {e}")))?;
+        match value.get("format").and_then(|f| f.as_str()) {
+            Some(BUNDLE_FORMAT) => {}
+            Some(other) => {
+                return Err(bad(format!(
+                    "format is {other:?}, expected {BUNDLE_FORMAT:?}"
+                )))
+            }
+            None => return Err(bad(format!("no \"format\": {BUNDLE_FORMAT:?} field"))),
+        }
+        match value.get("format_version").and_then(|v| v.as_u64()) {
+            Some(BUNDLE_FORMAT_VERSION) => {}
+            Some(v) => {
+                return Err(bad(format!(
+                    "format_version {v} is not supported (this build reads {BUNDLE_FORMAT_VERSION})"
+                )))
+            }
+            None => return Err(bad("no integer \"format_version\" field".into())),
+        }
+        let m: Manifest = serde_json::from_value(value).map_err(|e| bad(e.to_string()))?;
+        if m.input_size_multiple == 0 || m.input_size_multiple > 1024 {
+            return Err(bad(format!(
+                "input_size_multiple {} is not in 1..=1024",
+                m.input_size_multiple
+            )));
+        }
+        let n = m.normalisation;
+        if !(n.max_depth_m > 0.0 && n.max_depth_m.is_finite()) {
+            return Err(bad(format!(
+                "normalisation.max_depth_m {} is not a positive number",
+                n.max_depth_m
+            )));
+        }
+        if !(n.amplitude_percentile > 0.0 && n.amplitude_percentile <= 100.0) {
+            return Err(bad(format!(
+                "normalisation.amplitude_percentile {} is not in (0, 100]",
+                n.amplitude_percentile
+            )));
+        }
+        for role in GRAPH_ROLES {
+            let Some(g) = m.graphs.get(role) else {
+                return Err(bad(format!(
+                    "graph \"{role}\" is missing from \"graphs\" (the chain needs flow, fuse and refine)"
+                )));
+            };
+            m.check_graph(role, g, path)?;
+        }
+        Ok(m)
+    }
+
+    fn check_graph(&self, role: &str, g: &GraphSpec, path: &Path) -> Result<(), BundleError> {
+        let graph = static_role(role);
+        let broken = |message: String| BundleError::Contract {
+            path: path.to_path_buf(),
+            graph,
+            message,
+        };
+        let plain_name =
+            !g.file.is_empty() && !g.file.contains(['/', '\\']) && g.file != "." && g.file != "..";
+        if !plain_name {
+            return Err(broken(format!(
+                "file {:?} is not a plain file name inside the bundle",
+                g.file
+            )));
+        }
+        if g.sha256.len() != 64 || !g.sha256.bytes().all(|b| b.is_ascii_hexdigit()) {
+            return Err(broken(format!(
+                "sha256 {:?} is not a 64-digit hex digest",
+                g.sha256
+            )));
+        }
+        let contract = contract(role).expect("GRAPH_ROLES all have contracts");
+        check_tensors(&g.inputs, contract.inputs, "input").map_err(&broken)?;
+        let out = [(contract.output.0, contract.output.1, true)];
+        check_tensors(&g.outputs, &out, "output").map_err(&broken)?;
+        if role == "refine" {
+            let has_rgb = g.inputs.iter().any(|t| t.name == "rgb");
+            let wants_rgb = !matches!(self.variant.as_str(), "norgb" | "deeptof");
+            if has_rgb != wants_rgb {
+                return Err(broken(format!(
+                    "variant {:?} {} an rgb input, but the graph {} one",
+                    self.variant,
+                    if wants_rgb { "takes" } else { "takes no" },
+                    if has_rgb {
+                        "declares"
+                    } else {
+                        "does not declare"
+                    }
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The spec of graph `role` (`flow`, `fuse` or `refine`); present after [`parse`](Self::parse).
+    pub fn graph(&self, role: &str) -> Option<&GraphSpec> {
+        self.graphs.get(role)
+    }
+}
+
+/// Checks declared tensors against a contract: every declared name is known, every required one
+/// is present, none twice, channel counts match.
+fn check_tensors(
+    declared: &[TensorSpec],
+    contract: &[(&str, usize, bool)],
+    kind: &str,
+) -> Result<(), String> {
+    for (i, t) in declared.iter().enumerate() {
+        let Some(&(_, channels, _)) = contract.iter().find(|c| c.0 == t.name) else {
+            let known: Vec<&str> = contract.iter().map(|c| c.0).collect();
+            return Err(format!(
+                "unknown {kind} {:?} (the chain provides {known:?})",
+                t.name
+            ));
+        };
+        if declared[..i].iter().any(|o| o.name == t.name) {
+            return Err(format!("{kind} {:?} is declared twice", t.name));
+        }
+        if t.shape.len() != 4 {
+            return Err(format!(
+                "{kind} {:?} has shape {:?}; expected [N, C, H, W]",
+                t.name, t.shape
+            ));
+        }
+        if t.channels() != Some(channels) {
+            return Err(format!(
+                "{kind} {:?} has {} channels, expected {channels}",
+                t.name, t.shape[1]
+            ));
+        }
+    }
+    for &(name, _, required) in contract {
+        if required && !declared.iter().any(|t| t.name == name) {
+            return Err(format!("required {kind} {name:?} is not declared"));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,21 @@
+//! Model bundles: the three ONNX graphs of DEAR (rough flow, flow fusion, depth refinement)
+//! with their manifest, verified and run by `tract` (crate feature `inference`).
+//!
+//! - [`manifest`]: `model.json` and the graphs' I/O contract;
+//! - [`bundle`]: [`ModelBundle::load`], checksum and contract checks;
+//! - [`runner`]: [`BundleRunner`], the graphs optimised for one stream resolution, with
+//!   replicate padding to the bundle's size multiple;
+//! - [`error`]: the error type, [`BundleError`].
+//!
+//! The warps, the least-squares calibration and the normalisation are not in the graphs: they
+//! run in Rust ([`crate::dear`]) between the three networks.
+
+pub mod bundle;
+pub mod error;
+pub mod manifest;
+pub mod runner;
+
+pub use bundle::ModelBundle;
+pub use error::BundleError;
+pub use manifest::{Manifest, Normalisation};
+pub use runner::{BundleRunner, RunnerOptions};

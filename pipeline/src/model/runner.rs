@@ -1,0 +1,392 @@
+//! Running the three graphs of a bundle at one stream resolution.
+//!
+//! tract optimises a graph best when every dimension is known, so [`BundleRunner::new`] fixes
+//! the input shapes to `1 × C × H' × W'` (the stream's size rounded up to the bundle's
+//! `input_size_multiple`) and optimises each graph once; a stream that changes resolution needs
+//! a new runner. Inputs are replicate-padded at the bottom and right (so pixel coordinates, and
+//! hence flows, are unchanged, and the network sees no artificial edge), outputs are cropped
+//! back to `H × W`.
+//!
+//! Each graph keeps one tract state that is reused frame after frame. With `threads > 1` (and
+//! this crate's `multithread` feature) matrix products run on a private rayon pool of that
+//! size, attached to the plans, so the pipeline's own rayon work is not starved by them.
+
+use ndarray::{ArrayView2, ArrayViewMut2};
+use tract_onnx::prelude::*;
+
+use crate::frame::Flow;
+use crate::model::bundle::{LoadedGraph, ModelBundle};
+use crate::model::error::BundleError;
+use crate::model::manifest::contract;
+
+/// Largest padded side a runner accepts: beyond it a single plane is gigabytes.
+pub const MAX_SIDE: usize = 16384;
+
+/// How the runner executes graphs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RunnerOptions {
+    /// Threads for tract's matrix products. `1` runs them on the calling thread. Values above
+    /// 1 take effect only with the crate feature `multithread` (tract-linalg's
+    /// `multithread-mm`); without it they are ignored.
+    pub threads: usize,
+}
+
+impl Default for RunnerOptions {
+    /// Single-threaded: measured faster on the 2-core target (see `benches/dear_chain.rs`).
+    fn default() -> Self {
+        RunnerOptions { threads: 1 }
+    }
+}
+
+/// The three graphs of a bundle, optimised for one resolution.
+#[derive(Debug)]
+pub struct BundleRunner {
+    width: usize,
+    height: usize,
+    padded: (usize, usize),
+    refine_uses_rgb: bool,
+    flow: GraphRunner,
+    fuse: GraphRunner,
+    refine: GraphRunner,
+}
+
+impl BundleRunner {
+    /// Optimises every graph of `bundle` for `width × height` frames, single-threaded.
+    ///
+    /// # Errors
+    /// [`BundleError::Resolution`] for a zero or oversized frame, [`BundleError::Onnx`] when
+    /// tract cannot type or optimise a graph at that size, [`BundleError::Contract`] when a
+    /// graph's output does not have the contract's shape.
+    pub fn new(bundle: &ModelBundle, width: usize, height: usize) -> Result<Self, BundleError> {
+        Self::with_options(bundle, width, height, RunnerOptions::default())
+    }
+
+    /// [`new`](Self::new) with explicit [`RunnerOptions`].
+    ///
+    /// # Errors
+    /// As [`new`](Self::new); [`BundleError::Resolution`] also when the thread pool cannot be
+    /// created.
+    pub fn with_options(
+        bundle: &ModelBundle,
+        width: usize,
+        height: usize,
+        options: RunnerOptions,
+    ) -> Result<Self, BundleError> {
+        let resolution = |message: String| BundleError::Resolution {
+            width,
+            height,
+            message,
+        };
+        if width == 0 || height == 0 {
+            return Err(resolution("width and height must be positive".into()));
+        }
+        let m = bundle.input_size_multiple();
+        let padded = (height.div_ceil(m) * m, width.div_ceil(m) * m);
+        if padded.0 > MAX_SIDE || padded.1 > MAX_SIDE {
+            return Err(resolution(format!(
+                "padded size {}x{} exceeds {MAX_SIDE}",
+                padded.1, padded.0
+            )));
+        }
+        let executor = executor(options.threads).map_err(resolution)?;
+        let run_options = RunOptions {
+            executor,
+            ..RunOptions::default()
+        };
+        let build = |role: &str| GraphRunner::new(bundle.graph(role), padded, &run_options);
+        Ok(BundleRunner {
+            width,
+            height,
+            padded,
+            refine_uses_rgb: bundle.refine_uses_rgb(),
+            flow: build("flow")?,
+            fuse: build("fuse")?,
+            refine: build("refine")?,
+        })
+    }
+
+    /// `(height, width)` of the stream.
+    pub fn dim(&self) -> (usize, usize) {
+        (self.height, self.width)
+    }
+
+    /// `(height, width)` the graphs run at (the stream's, padded up to the size multiple).
+    pub fn padded_dim(&self) -> (usize, usize) {
+        self.padded
+    }
+
+    /// Whether [`refine`](Self::refine) needs the RGB planes.
+    pub fn refine_uses_rgb(&self) -> bool {
+        self.refine_uses_rgb
+    }
+
+    /// Rough flow `W_rough` from RGB planes in `[0, 1]` and the normalised amplitude.
+    ///
+    /// # Errors
+    /// [`BundleError::InputShape`] when a plane is not `H × W`, [`BundleError::Run`] when tract
+    /// fails.
+    pub fn flow(
+        &mut self,
+        rgb: [ArrayView2<f32>; 3],
+        amplitude: ArrayView2<f32>,
+        out: &mut Flow,
+    ) -> Result<(), BundleError> {
+        self.flow.run(
+            &[("rgb", &rgb), ("amplitude", &[amplitude])],
+            &mut [out.u.view_mut(), out.v.view_mut()],
+        )
+    }
+
+    /// Fused flow `W_refn` from `W_rough` and `W_convt`.
+    ///
+    /// # Errors
+    /// As [`flow`](Self::flow).
+    pub fn fuse(&mut self, rough: &Flow, convt: &Flow, out: &mut Flow) -> Result<(), BundleError> {
+        self.fuse.run(
+            &[
+                ("flow_rough", &[rough.u.view(), rough.v.view()]),
+                ("flow_convt", &[convt.u.view(), convt.v.view()]),
+            ],
+            &mut [out.u.view_mut(), out.v.view_mut()],
+        )
+    }
+
+    /// Refined depth (metres) from the warped normalised amplitude, the warped depth (metres)
+    /// and, for variants that use it, the RGB planes.
+    ///
+    /// # Errors
+    /// As [`flow`](Self::flow); [`BundleError::Run`] also when the graph needs RGB and `rgb`
+    /// is `None`.
+    pub fn refine(
+        &mut self,
+        amplitude: ArrayView2<f32>,
+        depth: ArrayView2<f32>,
+        rgb: Option<[ArrayView2<f32>; 3]>,
+        out: ArrayViewMut2<f32>,
+    ) -> Result<(), BundleError> {
+        let amp = [amplitude];
+        let dep = [depth];
+        let mut inputs: Vec<(&str, &[ArrayView2<f32>])> =
+            vec![("amplitude", &amp), ("depth", &dep)];
+        let rgb_planes;
+        if self.refine_uses_rgb {
+            rgb_planes = rgb.ok_or_else(|| BundleError::Run {
+                graph: "refine",
+                message: "this refinement variant needs the RGB image".into(),
+            })?;
+            inputs.push(("rgb", &rgb_planes));
+        }
+        self.refine.run(&inputs, &mut [out])
+    }
+}
+
+/// The executor of the plans: `None` (the calling thread) or a private pool.
+#[cfg(feature = "multithread")]
+fn executor(threads: usize) -> Result<Option<multithread::Executor>, String> {
+    if threads <= 1 {
+        return Ok(None);
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("dear-tract-{i}"))
+        .build()
+        .map_err(|e| format!("cannot start {threads} inference threads: {e}"))?;
+    Ok(Some(multithread::Executor::MultiThread(
+        std::sync::Arc::new(pool),
+    )))
+}
+
+#[cfg(not(feature = "multithread"))]
+fn executor(_threads: usize) -> Result<Option<multithread::Executor>, String> {
+    Ok(None)
+}
+
+/// One optimised graph with its reusable state and its input order.
+struct GraphRunner {
+    role: &'static str,
+    state: TypedSimpleState,
+    /// `(name, channels)` per graph input, in the graph's order.
+    inputs: Vec<(String, usize)>,
+    out_channels: usize,
+    padded: (usize, usize),
+}
+
+impl std::fmt::Debug for GraphRunner {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GraphRunner")
+            .field("role", &self.role)
+            .field("inputs", &self.inputs)
+            .field("out_channels", &self.out_channels)
+            .field("padded", &self.padded)
+            .finish_non_exhaustive()
+    }
+}
+
+impl GraphRunner {
+    fn new(
+        graph: &LoadedGraph,
+        padded: (usize, usize),
+        options: &RunOptions,
+    ) -> Result<Self, BundleError> {
+        let onnx_err = |e: TractError| BundleError::Onnx {
+            path: graph.path.clone(),
+            graph: graph.role,
+            message: format!("{e:#}"),
+        };
+        let contract = contract(graph.role).expect("every role has a contract");
+        let (hp, wp) = padded;
+        let mut model = graph.model.clone();
+        let mut inputs = Vec::with_capacity(graph.input_names.len());
+        for (i, name) in graph.input_names.iter().enumerate() {
+            let channels = contract
+                .inputs
+                .iter()
+                .find(|c| c.0 == name)
+                .map(|c| c.1)
+                .expect("ModelBundle::load checked the input names");
+            let fact = InferenceFact::dt_shape(f32::datum_type(), tvec![1, channels, hp, wp]);
+            model.set_input_fact(i, fact).map_err(onnx_err)?;
+            inputs.push((name.clone(), channels));
+        }
+        let typed = model.into_optimized().map_err(onnx_err)?;
+        let out_channels = contract.output.1;
+        let want: TVec<TDim> = tvec![1.into(), out_channels.into(), hp.into(), wp.into()];
+        let got = &typed.output_fact(0).map_err(onnx_err)?.shape;
+        if got.iter().cloned().collect::<TVec<TDim>>() != want {
+            return Err(BundleError::Contract {
+                path: graph.path.clone(),
+                graph: graph.role,
+                message: format!(
+                    "output {:?} has shape {got:?} for {hp}x{wp} inputs, expected {want:?}",
+                    contract.output.0
+                ),
+            });
+        }
+        let plan = typed
+            .into_runnable_with_options(options)
+            .map_err(onnx_err)?;
+        let state = TypedSimpleState::new(&plan).map_err(onnx_err)?;
+        Ok(GraphRunner {
+            role: graph.role,
+            state,
+            inputs,
+            out_channels,
+            padded,
+        })
+    }
+
+    /// Pads the named inputs into tensors, runs, crops the single output into `outputs`
+    /// (one plane per output channel).
+    fn run(
+        &mut self,
+        provided: &[(&str, &[ArrayView2<f32>])],
+        outputs: &mut [ArrayViewMut2<f32>],
+    ) -> Result<(), BundleError> {
+        let run_err = |message: String| BundleError::Run {
+            graph: self.role,
+            message,
+        };
+        let dim = outputs
+            .first()
+            .map(|o| o.dim())
+            .ok_or_else(|| run_err("no output planes".into()))?;
+        if outputs.len() != self.out_channels || outputs.iter().any(|o| o.dim() != dim) {
+            return Err(run_err(format!(
+                "expected {} output planes of one shape",
+                self.out_channels
+            )));
+        }
+        let mut tensors: TVec<TValue> = TVec::with_capacity(self.inputs.len());
+        for (name, channels) in &self.inputs {
+            let planes = provided
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, p)| *p)
+                .ok_or_else(|| run_err(format!("input {name:?} was not provided")))?;
+            if planes.len() != *channels {
+                return Err(run_err(format!(
+                    "input {name:?} has {} planes, expected {channels}",
+                    planes.len()
+                )));
+            }
+            for p in planes {
+                if p.dim() != dim {
+                    return Err(BundleError::InputShape {
+                        graph: self.role,
+                        input: static_input(name),
+                        expected: dim,
+                        found: p.dim(),
+                    });
+                }
+            }
+            tensors.push(
+                self.padded_tensor(planes)
+                    .map_err(|e| run_err(format!("{e:#}")))?,
+            );
+        }
+        let result = self
+            .state
+            .run(tensors)
+            .map_err(|e| run_err(format!("{e:#}")))?;
+        let out = result
+            .first()
+            .ok_or_else(|| run_err("the graph returned no output".into()))?;
+        let (hp, wp) = self.padded;
+        if out.shape() != [1, self.out_channels, hp, wp] {
+            return Err(run_err(format!(
+                "output shape {:?}, expected [1, {}, {hp}, {wp}]",
+                out.shape(),
+                self.out_channels
+            )));
+        }
+        let plain = out
+            .try_as_plain_ram()
+            .map_err(|e| run_err(format!("{e:#}")))?;
+        let data = plain
+            .as_slice::<f32>()
+            .map_err(|e| run_err(format!("{e:#}")))?;
+        let (h, w) = dim;
+        for (c, plane) in outputs.iter_mut().enumerate() {
+            let base = c * hp * wp;
+            for (y, mut row) in plane.rows_mut().into_iter().enumerate() {
+                let src = &data[base + y * wp..base + y * wp + w];
+                for (o, s) in row.iter_mut().zip(src) {
+                    *o = *s;
+                }
+            }
+            debug_assert_eq!(plane.dim(), (h, w));
+        }
+        Ok(())
+    }
+
+    /// A `1 × C × H' × W'` tensor of `planes`, replicating the last row and column into the
+    /// padding.
+    fn padded_tensor(&self, planes: &[ArrayView2<f32>]) -> TractResult<TValue> {
+        let (hp, wp) = self.padded;
+        let mut t = Tensor::zero::<f32>(&[1, planes.len(), hp, wp])?;
+        {
+            let mut view = t.try_as_plain_ram_mut()?;
+            let data = view.as_slice_mut::<f32>()?;
+            for (c, plane) in planes.iter().enumerate() {
+                let (h, w) = plane.dim();
+                let base = c * hp * wp;
+                for y in 0..hp {
+                    let src = plane.row(y.min(h - 1));
+                    let dst = &mut data[base + y * wp..base + (y + 1) * wp];
+                    for (x, d) in dst.iter_mut().enumerate() {
+                        *d = src[x.min(w - 1)];
+                    }
+                }
+            }
+        }
+        Ok(t.into_tvalue())
+    }
+}
+
+/// Input names as `'static` strings for [`BundleError::InputShape`].
+fn static_input(name: &str) -> &'static str {
+    ["rgb", "amplitude", "flow_rough", "flow_convt", "depth"]
+        .into_iter()
+        .find(|n| *n == name)
+        .unwrap_or("input")
+}

@@ -1,0 +1,725 @@
+//! The online calibration estimator: decides per frame whether to run the rough-flow network,
+//! and filters the resulting measurements over time so that one bad frame cannot move the
+//! published calibration.
+//!
+//! Per frame the caller asks [`OnlineCalibrator::begin_frame`] what to do, processes the frame
+//! (`Full` when told to run the network, otherwise `Cached` with the current estimate), then
+//! reports with [`OnlineCalibrator::end_frame`] the network frame's [`Measurement`] (if any)
+//! and the frame's alignment residual (if any).
+//!
+//! Filtering, in order:
+//! 1. *Admission*: a fit that failed, used fewer than `min_pixels`, explains less than
+//!    `min_inlier_fraction` of the flow or has an inlier RMS above `max_rms_px` is rejected.
+//! 2. *Innovation gate*: once the estimate is established, an admitted measurement whose
+//!    predicted flow differs from the estimate's by more than `gate_px` anywhere in the depth
+//!    range is held back. If `jump_confirmations` consecutive held-back measurements agree
+//!    with each other, the calibration really jumped (an OIS step, a knock): they replace the
+//!    history. One wild frame is therefore never enough.
+//! 3. *Running median*: the estimate is the per-parameter median of the last `window` accepted
+//!    measurements — bounded influence for anything the gate lets through, and a lag of about
+//!    `window / 2` measurements on a drift.
+//!
+//! The network runs when there is no established estimate yet, every `interval_frames`, sooner
+//! (`retry_frames`) after a rejected measurement, and when the alignment residual has exceeded
+//! the value measured on the last network frame by `residual_trigger_ratio` for
+//! `residual_trigger_frames` consecutive frames.
+
+use std::collections::VecDeque;
+
+use crate::calibration::Calibration;
+use crate::geometry::LsqError;
+use crate::online::measurement::Measurement;
+
+/// Settings of [`OnlineCalibrator`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OnlineConfig {
+    /// Run the network at least every this many frames.
+    pub interval_frames: u32,
+    /// After a rejected measurement, retry after this many frames.
+    pub retry_frames: u32,
+    /// Accepted measurements before the estimate counts as established (until then the
+    /// network runs every frame and the gate is off).
+    pub warmup_measurements: usize,
+    /// Number of accepted measurements the running median spans.
+    pub window: usize,
+    /// Innovation gate: largest flow change (px) a measurement may propose.
+    pub gate_px: f32,
+    /// Depth range (m) over which flows are compared for the gate.
+    pub depth_range_m: (f32, f32),
+    /// Consecutive, mutually consistent held-back measurements that are taken as a real jump.
+    pub jump_confirmations: usize,
+    /// Minimum inlier fraction of an admissible measurement.
+    pub min_inlier_fraction: f32,
+    /// Maximum inlier RMS residual (px) of an admissible measurement.
+    pub max_rms_px: f32,
+    /// Minimum usable pixels of an admissible measurement.
+    pub min_pixels: usize,
+    /// Relative growth of the alignment residual over its post-estimate value that triggers
+    /// the network.
+    pub residual_trigger_ratio: f32,
+    /// Absolute margin added to the trigger level (the residual is noisy near 0).
+    pub residual_trigger_margin: f32,
+    /// Consecutive frames above the trigger level before the network runs.
+    pub residual_trigger_frames: u32,
+}
+
+impl Default for OnlineConfig {
+    /// Every 30 frames (1 s at 30 fps; drift is far slower), median of 5, gate 3 px over
+    /// 0.3–5 m, jumps confirmed by 3 measurements, residual trigger +25 % for 3 frames.
+    fn default() -> Self {
+        OnlineConfig {
+            interval_frames: 30,
+            retry_frames: 5,
+            warmup_measurements: 3,
+            window: 5,
+            gate_px: 3.0,
+            depth_range_m: (0.3, 5.0),
+            jump_confirmations: 3,
+            min_inlier_fraction: 0.5,
+            max_rms_px: 2.0,
+            min_pixels: 500,
+            residual_trigger_ratio: 0.25,
+            residual_trigger_margin: 0.02,
+            residual_trigger_frames: 3,
+        }
+    }
+}
+
+/// Why the network runs on a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Trigger {
+    /// No established estimate yet.
+    Warmup,
+    /// `interval_frames` since the last network frame.
+    Interval,
+    /// The last measurement was rejected; retrying early.
+    Retry,
+    /// The alignment residual grew.
+    Residual,
+}
+
+/// What to do with the current frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameDecision {
+    /// `Some(reason)`: run the rough-flow network (`Full` mode) on this frame.
+    pub run_network: Option<Trigger>,
+    /// The current estimate (use it for `Cached` mode when the network does not run).
+    pub calibration: Option<Calibration>,
+}
+
+/// What became of a measurement.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Outcome {
+    /// Entered the running median.
+    Accepted,
+    /// Far from the estimate; held back pending confirmation.
+    Gated {
+        /// Largest flow difference to the estimate, px.
+        innovation_px: f32,
+    },
+    /// Confirmed a jump: the history was replaced by the consistent held-back measurements.
+    Jump,
+    /// Not admissible.
+    Rejected(Rejection),
+}
+
+/// Why a measurement was not admissible.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Rejection {
+    /// The fit failed.
+    FitFailed,
+    /// Fewer usable pixels than `min_pixels`.
+    TooFewPixels(usize),
+    /// Inlier fraction below `min_inlier_fraction`.
+    FewInliers(f32),
+    /// Inlier RMS above `max_rms_px`.
+    LargeResidual(f32),
+    /// Non-finite parameters.
+    NotFinite,
+}
+
+/// The online estimator (see the module docs).
+#[derive(Debug, Clone)]
+pub struct OnlineCalibrator {
+    config: OnlineConfig,
+    accepted: VecDeque<Measurement>,
+    pending: Vec<Measurement>,
+    /// Outcomes of the last `window` network frames: accepted or not.
+    attempts: VecDeque<bool>,
+    estimate: Option<Calibration>,
+    frame: u64,
+    last_network_frame: Option<u64>,
+    last_estimate_frame: Option<u64>,
+    last_rejected: bool,
+    residual_baseline: Option<f32>,
+    residual_high_frames: u32,
+    residual_triggered: bool,
+    this_frame_network: bool,
+}
+
+impl OnlineCalibrator {
+    /// A fresh estimator with no estimate (the network runs on the first frames).
+    pub fn new(config: OnlineConfig) -> Self {
+        let config = OnlineConfig {
+            window: config.window.max(1),
+            warmup_measurements: config.warmup_measurements.max(1),
+            jump_confirmations: config.jump_confirmations.max(1),
+            interval_frames: config.interval_frames.max(1),
+            retry_frames: config.retry_frames.max(1),
+            ..config
+        };
+        OnlineCalibrator {
+            config,
+            accepted: VecDeque::new(),
+            pending: Vec::new(),
+            attempts: VecDeque::new(),
+            estimate: None,
+            frame: 0,
+            last_network_frame: None,
+            last_estimate_frame: None,
+            last_rejected: false,
+            residual_baseline: None,
+            residual_high_frames: 0,
+            residual_triggered: false,
+            this_frame_network: false,
+        }
+    }
+
+    /// The settings in use.
+    pub fn config(&self) -> &OnlineConfig {
+        &self.config
+    }
+
+    /// Starts a frame: whether to run the network, and the estimate to use otherwise.
+    pub fn begin_frame(&mut self) -> FrameDecision {
+        self.frame += 1;
+        let since = self.last_network_frame.map(|f| self.frame - f);
+        let reason = if self.accepted.len() < self.config.warmup_measurements {
+            Some(Trigger::Warmup)
+        } else if self.last_rejected
+            && since.is_none_or(|s| s >= u64::from(self.config.retry_frames))
+        {
+            Some(Trigger::Retry)
+        } else if self.residual_triggered {
+            Some(Trigger::Residual)
+        } else if since.is_none_or(|s| s >= u64::from(self.config.interval_frames)) {
+            Some(Trigger::Interval)
+        } else {
+            None
+        };
+        self.this_frame_network = reason.is_some();
+        FrameDecision {
+            run_network: reason,
+            calibration: self.estimate,
+        }
+    }
+
+    /// Ends a frame: the network frame's fit (`None` when the network did not run) and the
+    /// frame's alignment residual. Returns what became of the measurement.
+    pub fn end_frame(
+        &mut self,
+        measurement: Option<Result<Measurement, LsqError>>,
+        residual: Option<f32>,
+    ) -> Option<Outcome> {
+        let outcome = measurement.map(|m| self.observe(m));
+        if self.this_frame_network {
+            self.last_network_frame = Some(self.frame);
+            self.residual_triggered = false;
+            self.residual_high_frames = 0;
+            // The residual right after a network estimate is this scene's "aligned" level.
+            if matches!(outcome, Some(Outcome::Accepted | Outcome::Jump)) {
+                self.residual_baseline = residual.filter(|r| r.is_finite());
+            }
+        } else if let (Some(r), Some(base)) = (residual, self.residual_baseline) {
+            let level = base * (1.0 + self.config.residual_trigger_ratio)
+                + self.config.residual_trigger_margin;
+            if r > level {
+                self.residual_high_frames += 1;
+                if self.residual_high_frames >= self.config.residual_trigger_frames {
+                    self.residual_triggered = true;
+                }
+            } else {
+                self.residual_high_frames = 0;
+            }
+        }
+        self.this_frame_network = false;
+        outcome
+    }
+
+    fn observe(&mut self, m: Result<Measurement, LsqError>) -> Outcome {
+        let outcome = match m {
+            Err(_) => Outcome::Rejected(Rejection::FitFailed),
+            Ok(m) => match self.admit(&m) {
+                Err(why) => Outcome::Rejected(why),
+                Ok(()) => self.gate(m),
+            },
+        };
+        let ok = matches!(outcome, Outcome::Accepted | Outcome::Jump);
+        self.last_rejected = matches!(outcome, Outcome::Rejected(_));
+        self.attempts.push_back(ok);
+        while self.attempts.len() > self.config.window {
+            self.attempts.pop_front();
+        }
+        if ok {
+            self.estimate = Some(median(&self.accepted));
+            self.last_estimate_frame = Some(self.frame);
+        }
+        outcome
+    }
+
+    fn admit(&self, m: &Measurement) -> Result<(), Rejection> {
+        let c = m.calibration;
+        if ![c.tx, c.ty, c.cx, c.cy].iter().all(|v| v.is_finite()) {
+            return Err(Rejection::NotFinite);
+        }
+        if m.pixels_used < self.config.min_pixels {
+            return Err(Rejection::TooFewPixels(m.pixels_used));
+        }
+        // Written to reject NaN too.
+        if m.inlier_fraction.is_nan() || m.inlier_fraction < self.config.min_inlier_fraction {
+            return Err(Rejection::FewInliers(m.inlier_fraction));
+        }
+        if m.rms_residual_px.is_nan() || m.rms_residual_px > self.config.max_rms_px {
+            return Err(Rejection::LargeResidual(m.rms_residual_px));
+        }
+        Ok(())
+    }
+
+    fn gate(&mut self, m: Measurement) -> Outcome {
+        let established = self.accepted.len() >= self.config.warmup_measurements;
+        let innovation = self
+            .estimate
+            .map_or(0.0, |e| self.flow_distance(&e, &m.calibration));
+        if !established || innovation <= self.config.gate_px {
+            self.pending.clear();
+            self.push_accepted(m);
+            return Outcome::Accepted;
+        }
+        // Held back. Keep only the run of held-back measurements consistent with this one.
+        let consistent = self.pending.last().is_none_or(|p| {
+            self.flow_distance(&p.calibration, &m.calibration) <= self.config.gate_px
+        });
+        if !consistent {
+            self.pending.clear();
+        }
+        self.pending.push(m);
+        if self.pending.len() >= self.config.jump_confirmations {
+            self.accepted.clear();
+            for p in std::mem::take(&mut self.pending) {
+                self.push_accepted(p);
+            }
+            return Outcome::Jump;
+        }
+        Outcome::Gated {
+            innovation_px: innovation,
+        }
+    }
+
+    fn push_accepted(&mut self, m: Measurement) {
+        self.accepted.push_back(m);
+        while self.accepted.len() > self.config.window {
+            self.accepted.pop_front();
+        }
+    }
+
+    /// Largest end-point difference of the flows two calibrations predict over the depth
+    /// range (the flow is affine in 1/z, so the extremes are at the range's ends).
+    fn flow_distance(&self, a: &Calibration, b: &Calibration) -> f32 {
+        let (z0, z1) = self.config.depth_range_m;
+        [z0, z1]
+            .iter()
+            .map(|&z| {
+                let du = (a.tx - b.tx) / z + (a.cx - b.cx);
+                let dv = (a.ty - b.ty) / z + (a.cy - b.cy);
+                du.hypot(dv)
+            })
+            .fold(0.0, f32::max)
+    }
+
+    /// The current filtered calibration, if any measurement was accepted.
+    pub fn estimate(&self) -> Option<Calibration> {
+        self.estimate
+    }
+
+    /// Quality of the estimate in `[0, 1]`:
+    /// `fit · acceptance · freshness` where
+    /// - `fit` is the median over the window of `inlier_fraction / (1 + rms²)` (rms in px): 1 for
+    ///   a flow the model explains exactly, 0.5 at 1 px RMS;
+    /// - `acceptance` is the fraction of the last `window` network frames that were accepted
+    ///   (rejected and held-back ones lower it);
+    /// - `freshness` is 1 up to `2 · interval_frames` frames since the last accepted estimate and
+    ///   decays exponentially (time constant `4 · interval_frames`) after.
+    ///
+    /// 0 without an estimate.
+    pub fn quality(&self) -> f32 {
+        if self.estimate.is_none() || self.accepted.is_empty() {
+            return 0.0;
+        }
+        let mut fits: Vec<f32> = self
+            .accepted
+            .iter()
+            .map(|m| m.inlier_fraction / (1.0 + m.rms_residual_px * m.rms_residual_px))
+            .collect();
+        fits.sort_by(f32::total_cmp);
+        let fit = fits[fits.len() / 2];
+        let acceptance = if self.attempts.is_empty() {
+            1.0
+        } else {
+            self.attempts.iter().filter(|&&a| a).count() as f32 / self.attempts.len() as f32
+        };
+        let n = self.config.interval_frames as f32;
+        let age = self.frames_since_estimate().unwrap_or(u64::MAX) as f32;
+        let freshness = (-(age - 2.0 * n).max(0.0) / (4.0 * n)).exp();
+        (fit * acceptance * freshness).clamp(0.0, 1.0)
+    }
+
+    /// Frames since the estimate last changed (0 on the frame it changed), `None` before any.
+    pub fn frames_since_estimate(&self) -> Option<u64> {
+        self.last_estimate_frame.map(|f| self.frame - f)
+    }
+
+    /// Whether the current frame (between `begin_frame` and `end_frame`) runs the network.
+    pub fn runs_network_this_frame(&self) -> bool {
+        self.this_frame_network
+    }
+
+    /// Frames started so far.
+    pub fn frames(&self) -> u64 {
+        self.frame
+    }
+}
+
+/// Per-parameter median of the measurements (upper median for an even count).
+fn median(ms: &VecDeque<Measurement>) -> Calibration {
+    let pick = |f: fn(&Calibration) -> f32| {
+        let mut v: Vec<f32> = ms.iter().map(|m| f(&m.calibration)).collect();
+        v.sort_by(f32::total_cmp);
+        v[v.len() / 2]
+    };
+    Calibration {
+        tx: pick(|c| c.tx),
+        ty: pick(|c| c.ty),
+        cx: pick(|c| c.cx),
+        cy: pick(|c| c.cy),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TRUE: Calibration = Calibration {
+        tx: 6.0,
+        ty: -2.0,
+        cx: 3.0,
+        cy: 1.0,
+    };
+
+    fn good(c: Calibration) -> Measurement {
+        Measurement {
+            calibration: c,
+            rms_residual_px: 0.3,
+            inlier_fraction: 0.95,
+            pixels_used: 10_000,
+        }
+    }
+
+    /// Deterministic small noise in [-a, a].
+    fn noise(i: u64, a: f32) -> f32 {
+        let x = (i.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as f32 / (1u64 << 24) as f32;
+        a * (2.0 * x - 1.0)
+    }
+
+    fn noisy(c: Calibration, i: u64) -> Calibration {
+        Calibration {
+            tx: c.tx + noise(4 * i, 0.1),
+            ty: c.ty + noise(4 * i + 1, 0.1),
+            cx: c.cx + noise(4 * i + 2, 0.05),
+            cy: c.cy + noise(4 * i + 3, 0.05),
+        }
+    }
+
+    /// Runs `frames` frames; `measure(frame)` gives the network's measurement when it runs.
+    fn drive(
+        est: &mut OnlineCalibrator,
+        frames: u64,
+        mut measure: impl FnMut(u64) -> Measurement,
+        mut each: impl FnMut(u64, &OnlineCalibrator, Option<Outcome>),
+    ) {
+        for _ in 0..frames {
+            let d = est.begin_frame();
+            let m = d.run_network.map(|_| Ok(measure(est.frames())));
+            let outcome = est.end_frame(m, None);
+            each(est.frames(), est, outcome);
+        }
+    }
+
+    /// Largest parameter difference.
+    fn dist(a: Calibration, b: Calibration) -> f32 {
+        [a.tx - b.tx, a.ty - b.ty, a.cx - b.cx, a.cy - b.cy]
+            .iter()
+            .fold(0.0, |m, d| m.max(d.abs()))
+    }
+
+    #[test]
+    fn warms_up_then_runs_the_network_every_interval() {
+        let config = OnlineConfig {
+            interval_frames: 10,
+            ..OnlineConfig::default()
+        };
+        let mut est = OnlineCalibrator::new(config);
+        assert_eq!(est.estimate(), None);
+        assert_eq!(est.quality(), 0.0);
+        let mut runs = Vec::new();
+        for f in 1..=40u64 {
+            let d = est.begin_frame();
+            if let Some(why) = d.run_network {
+                runs.push((f, why));
+            }
+            assert_eq!(est.runs_network_this_frame(), d.run_network.is_some());
+            let m = d.run_network.map(|_| Ok(good(noisy(TRUE, f))));
+            est.end_frame(m, None);
+        }
+        assert_eq!(
+            runs,
+            vec![
+                (1, Trigger::Warmup),
+                (2, Trigger::Warmup),
+                (3, Trigger::Warmup),
+                (13, Trigger::Interval),
+                (23, Trigger::Interval),
+                (33, Trigger::Interval)
+            ]
+        );
+        assert!(dist(est.estimate().unwrap(), TRUE) < 0.2);
+        assert!(est.quality() > 0.8, "{}", est.quality());
+    }
+
+    #[test]
+    fn one_wildly_wrong_frame_does_not_move_the_estimate() {
+        let mut est = OnlineCalibrator::new(OnlineConfig {
+            interval_frames: 1,
+            ..OnlineConfig::default()
+        });
+        let wild = Calibration {
+            tx: -40.0,
+            ty: 30.0,
+            cx: -25.0,
+            cy: 18.0,
+        };
+        let mut before = None;
+        drive(
+            &mut est,
+            30,
+            |f| {
+                if f == 20 {
+                    good(wild)
+                } else {
+                    good(noisy(TRUE, f))
+                }
+            },
+            |f, est, outcome| {
+                if f == 19 {
+                    before = est.estimate();
+                }
+                if f == 20 {
+                    assert!(
+                        matches!(outcome, Some(Outcome::Gated { .. })),
+                        "{outcome:?}"
+                    );
+                    assert_eq!(est.estimate(), before, "the wild frame moved the estimate");
+                }
+                if f > 3 {
+                    let e = est.estimate().unwrap();
+                    assert!(dist(e, TRUE) < 0.5, "frame {f}: {e:?}");
+                }
+            },
+        );
+        // Also a wild frame that the gate cannot see (during warm-up, no gate yet): the median
+        // of the window bounds it.
+        let mut est = OnlineCalibrator::new(OnlineConfig::default());
+        drive(
+            &mut est,
+            5,
+            |f| {
+                if f == 2 {
+                    good(wild)
+                } else {
+                    good(noisy(TRUE, f))
+                }
+            },
+            |_, _, _| {},
+        );
+        assert!(
+            dist(est.estimate().unwrap(), TRUE) < 0.5,
+            "{:?}",
+            est.estimate()
+        );
+    }
+
+    #[test]
+    fn a_slow_drift_is_tracked_with_bounded_lag() {
+        let interval = 10u32;
+        let mut est = OnlineCalibrator::new(OnlineConfig {
+            interval_frames: interval,
+            ..OnlineConfig::default()
+        });
+        // c_x drifts by 0.01 px/frame (OIS creep), t_x by 0.005 px·m/frame.
+        let at = |f: u64| Calibration {
+            tx: TRUE.tx + 0.005 * f as f32,
+            cx: TRUE.cx + 0.01 * f as f32,
+            ..TRUE
+        };
+        let window = est.config().window as f32;
+        // Median of `window` measurements taken every `interval` frames lags by about
+        // window/2 measurements; plus up to one interval since the last one; plus the noise.
+        let max_lag_frames = (window / 2.0 + 1.0) * interval as f32;
+        let bound = 0.01 * max_lag_frames + 0.06;
+        drive(
+            &mut est,
+            600,
+            |f| good(noisy(at(f), f)),
+            |f, est, _| {
+                if f > 60 {
+                    let e = est.estimate().unwrap();
+                    let err = (e.cx - at(f).cx).abs();
+                    assert!(
+                        err <= bound,
+                        "frame {f}: c_x {} vs {} (bound {bound})",
+                        e.cx,
+                        at(f).cx
+                    );
+                }
+            },
+        );
+        // And it does follow: the drift is 6 px over the run, far above the bound.
+        assert!(est.estimate().unwrap().cx > TRUE.cx + 5.0);
+    }
+
+    #[test]
+    fn a_real_jump_is_taken_after_confirmation() {
+        let mut est = OnlineCalibrator::new(OnlineConfig {
+            interval_frames: 1,
+            ..OnlineConfig::default()
+        });
+        let jumped = Calibration {
+            cx: TRUE.cx + 8.0,
+            ..TRUE
+        };
+        let mut outcomes = Vec::new();
+        drive(
+            &mut est,
+            20,
+            |f| good(noisy(if f > 10 { jumped } else { TRUE }, f)),
+            |f, _, o| {
+                if f > 10 {
+                    outcomes.push(o.unwrap());
+                }
+            },
+        );
+        assert!(matches!(outcomes[0], Outcome::Gated { .. }));
+        assert!(matches!(outcomes[1], Outcome::Gated { .. }));
+        assert_eq!(outcomes[2], Outcome::Jump);
+        assert!(dist(est.estimate().unwrap(), jumped) < 0.5);
+    }
+
+    #[test]
+    fn quality_falls_when_fits_are_bad() {
+        let mut est = OnlineCalibrator::new(OnlineConfig {
+            interval_frames: 1,
+            ..OnlineConfig::default()
+        });
+        drive(&mut est, 10, |f| good(noisy(TRUE, f)), |_, _, _| {});
+        let q_good = est.quality();
+        assert!(q_good > 0.8, "{q_good}");
+        // Fits that explain little of the flow are rejected: acceptance drops, and so does
+        // the quality, while the estimate stays where it was.
+        let kept = est.estimate();
+        drive(
+            &mut est,
+            3,
+            |_| Measurement {
+                inlier_fraction: 0.2,
+                ..good(TRUE)
+            },
+            |_, _, o| {
+                assert!(
+                    matches!(o, Some(Outcome::Rejected(Rejection::FewInliers(_)))),
+                    "{o:?}"
+                )
+            },
+        );
+        let q_rejected = est.quality();
+        assert!(q_rejected < 0.5 * q_good, "{q_rejected} vs {q_good}");
+        assert_eq!(est.estimate(), kept);
+        // Admissible but mediocre fits (1.5 px RMS) also lower it.
+        let mut est2 = OnlineCalibrator::new(OnlineConfig::default());
+        drive(
+            &mut est2,
+            5,
+            |f| Measurement {
+                rms_residual_px: 1.5,
+                inlier_fraction: 0.7,
+                ..good(noisy(TRUE, f))
+            },
+            |_, _, _| {},
+        );
+        assert!(est2.quality() < 0.3, "{}", est2.quality());
+        // Failed fits count as rejections too, and trigger an early retry.
+        let mut est3 = OnlineCalibrator::new(OnlineConfig {
+            interval_frames: 30,
+            retry_frames: 5,
+            ..OnlineConfig::default()
+        });
+        drive(&mut est3, 3, |f| good(noisy(TRUE, f)), |_, _, _| {});
+        for _ in 0..29 {
+            est3.begin_frame();
+            est3.end_frame(None, None);
+        }
+        let d = est3.begin_frame();
+        assert_eq!(d.run_network, Some(Trigger::Interval));
+        est3.end_frame(Some(Err(LsqError::ZeroWeight)), None);
+        let frames_before = est3.frames();
+        let retry_at = loop {
+            if est3.begin_frame().run_network.is_some() {
+                break est3.frames();
+            }
+            est3.end_frame(None, None);
+        };
+        assert_eq!(retry_at - frames_before, 5);
+        // Staleness: no estimate for a long time lowers the quality.
+        let q = est3.quality();
+        est3.end_frame(Some(Err(LsqError::ZeroWeight)), None);
+        for _ in 0..300 {
+            est3.begin_frame();
+            est3.end_frame(None, None);
+        }
+        assert!(est3.quality() < 0.2 * q, "{} vs {q}", est3.quality());
+    }
+
+    #[test]
+    fn a_growing_residual_triggers_the_network() {
+        let mut est = OnlineCalibrator::new(OnlineConfig {
+            interval_frames: 1000,
+            ..OnlineConfig::default()
+        });
+        // Warm-up frames with a residual of 0.4 set the baseline.
+        for f in 0..3 {
+            assert!(est.begin_frame().run_network.is_some());
+            est.end_frame(Some(Ok(good(noisy(TRUE, f)))), Some(0.4));
+        }
+        // Small fluctuations do not trigger.
+        for r in [0.41, 0.45, 0.39, 0.5, 0.42] {
+            assert_eq!(est.begin_frame().run_network, None);
+            est.end_frame(None, Some(r));
+        }
+        // Three frames above 0.4·1.25 + 0.02 = 0.52 do.
+        for _ in 0..3 {
+            assert_eq!(est.begin_frame().run_network, None);
+            est.end_frame(None, Some(0.7));
+        }
+        assert_eq!(est.begin_frame().run_network, Some(Trigger::Residual));
+        est.end_frame(Some(Ok(good(TRUE))), Some(0.4));
+        assert_eq!(est.begin_frame().run_network, None);
+    }
+}

@@ -1,0 +1,18 @@
+//! Online recalibration (beyond the paper): on a device the weak calibration drifts slowly
+//! compared with the frame rate, so the rough-flow network need not run on every frame.
+//!
+//! - [`measurement`]: one robust `(t, c)` fit of a network flow with its inlier statistics;
+//! - [`estimator`]: [`OnlineCalibrator`], when to run the network and the robust filter over
+//!   time (admission, innovation gate with jump confirmation, running median), with a quality
+//!   figure;
+//! - [`residual`]: a cheap per-frame alignment check (RGB vs warped-amplitude edges) that
+//!   triggers the network early when the alignment degrades.
+//!
+//! Independent of tract: it works on flows and depths, whoever computed them.
+
+pub mod estimator;
+pub mod measurement;
+pub mod residual;
+
+pub use estimator::{FrameDecision, OnlineCalibrator, OnlineConfig, Outcome, Rejection, Trigger};
+pub use measurement::Measurement;
