@@ -106,7 +106,7 @@ struct Common {
     #[arg(long, default_value_t = 4)]
     spp: usize,
     /// Indirect (MPI) paths per pixel.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 2)]
     indirect_spp: usize,
     /// Longest path in surface reflections (1 = no MPI).
     #[arg(long, default_value_t = 3)]

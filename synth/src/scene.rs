@@ -411,7 +411,7 @@ fn random_room<R: Rng>(rng: &mut R, scene: &mut Scene) -> Room {
             -0.85 * ceiling,
             rng.random_range(0.0..0.8 * front),
         );
-        let level = rng.random_range(1.0..2.5) * (1.0 + p.length_squared());
+        let level = rng.random_range(0.4..1.0) * (1.0 + p.length_squared());
         let tint = if warm {
             Vec3::new(1.0, 0.9, 0.75)
         } else {

@@ -14,7 +14,8 @@ use crate::transport::{render, RenderOptions, SignalImage};
 pub struct SimConfig {
     pub render: RenderOptions,
     pub sensor: SensorConfig,
-    /// RGB exposure: linear radiance × exposure before the sRGB curve.
+    /// RGB exposure: linear radiance `x` becomes `1 − exp(−exposure·x)` (a soft shoulder
+    /// instead of hard clipping) before the sRGB curve.
     pub rgb_exposure: f64,
 }
 
@@ -23,7 +24,7 @@ impl Default for SimConfig {
         SimConfig {
             render: RenderOptions::default(),
             sensor: SensorConfig::default(),
-            rgb_exposure: 0.9,
+            rgb_exposure: 1.5,
         }
     }
 }
@@ -53,7 +54,7 @@ pub fn linear_to_srgb8(v: f64) -> u8 {
 
 fn rgb_image(signal: &SignalImage, exposure: f64) -> Array3<u8> {
     Array3::from_shape_fn((signal.height, signal.width, 3), |(y, x, c)| {
-        linear_to_srgb8(signal.pixels[y * signal.width + x].rgb[c] * exposure)
+        linear_to_srgb8(1.0 - (-signal.pixels[y * signal.width + x].rgb[c] * exposure).exp())
     })
 }
 

@@ -52,7 +52,7 @@ pub struct RenderOptions {
     pub frequencies_hz: Vec<f64>,
     /// Also shade the RGB image (off in physics tests, which do not need it).
     pub rgb: bool,
-    /// Radius (px) of the edge-aware average applied to the indirect (MPI) phasors in
+    /// Radius (px) of the edge-aware average applied (twice) to the indirect (MPI) phasors in
     /// [`render`]; 0 disables it. See [`filter_indirect`].
     pub indirect_filter_radius: usize,
 }
@@ -61,7 +61,7 @@ impl Default for RenderOptions {
     fn default() -> Self {
         RenderOptions {
             spp: 4,
-            indirect_spp: 1,
+            indirect_spp: 2,
             max_bounces: 3,
             min_bounces: 1,
             jitter: true,
