@@ -123,6 +123,9 @@ struct Common {
     /// Invalidate pixels below this amplitude (DN); 0 keeps all.
     #[arg(long, default_value_t = 8.0)]
     min_amplitude: f64,
+    /// Horizontal offset of the ToF illuminator from the camera centre, millimetres.
+    #[arg(long, default_value_t = 0.0)]
+    light_offset_mm: f64,
     #[arg(long, default_value_t = 5)]
     min_objects: usize,
     #[arg(long, default_value_t = 25)]
@@ -146,6 +149,7 @@ impl Common {
         SceneConfig {
             min_objects: self.min_objects,
             max_objects: self.max_objects,
+            light_offset: dear_synth::math::Vec3::new(self.light_offset_mm * 1e-3, 0.0, 0.0),
             ..SceneConfig::default()
         }
     }

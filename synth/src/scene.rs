@@ -276,6 +276,12 @@ pub struct SceneConfig {
     pub max_depth: f64,
     /// Ambient IR irradiance range.
     pub ambient_ir: (f64, f64),
+    /// Position of the ToF illuminator relative to the camera centre (camera frame, metres).
+    /// Non-zero puts it beside the lens as on a real module; the sensor then measures half the
+    /// path camera → surface → illuminator, which differs from the radial distance by up to
+    /// about half the offset (a real module calibrates this; the simulator does not).
+    #[serde(default)]
+    pub light_offset: Vec3,
 }
 
 impl Default for SceneConfig {
@@ -286,6 +292,7 @@ impl Default for SceneConfig {
             min_depth: 0.3,
             max_depth: 4.0,
             ambient_ir: (0.0, 0.05),
+            light_offset: Vec3::ZERO,
         }
     }
 }
@@ -352,6 +359,7 @@ impl Scene {
     pub fn random(camera: Camera, config: &SceneConfig, seed: u64, index: u64) -> Scene {
         let mut rng = keyed_rng(seed, Stream::Scene, index, 0);
         let mut scene = Scene::empty(camera);
+        scene.tof_light_offset = config.light_offset;
         let room = random_room(&mut rng, &mut scene);
         scene.ambient_ir = rng.random_range(config.ambient_ir.0..=config.ambient_ir.1);
         let n = rng.random_range(config.min_objects..=config.max_objects.max(config.min_objects));

@@ -455,3 +455,65 @@ pub fn filter_indirect(image: &mut SignalImage, radius: usize, nf: usize) {
             }
         });
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The MPI filter averages within a surface and never across objects or depth edges.
+    #[test]
+    fn indirect_filter_stays_on_its_surface() {
+        let (w, h) = (12, 6);
+        let mut rng = FastRng::new(3);
+        let mut pixels = Vec::new();
+        for _y in 0..h {
+            for x in 0..w {
+                // Left half: object 0 at 1 m with noisy indirect light around 1; right half:
+                // object 1 at 2 m with none.
+                let left = x < w / 2;
+                let v = if left { 2.0 * rng.uniform() } else { 0.0 };
+                let mut p = PixelSignal {
+                    object: if left { 0 } else { 1 },
+                    normal: Vec3::Z,
+                    gt_z: if left { 1.0 } else { 2.0 },
+                    dc: 1.0 + v,
+                    indirect_dc: v,
+                    ..PixelSignal::default()
+                };
+                p.indirect[0] = Complex::new(v, 0.0);
+                p.phasor[0] = Complex::new(1.0 + v, 0.0);
+                pixels.push(p);
+            }
+        }
+        let before: Vec<f64> = pixels.iter().map(|p| p.indirect_dc).collect();
+        let mut img = SignalImage {
+            width: w,
+            height: h,
+            pixels,
+        };
+        filter_indirect(&mut img, 2, 1);
+        let var = |v: &[f64]| {
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            v.iter().map(|x| (x - m) * (x - m)).sum::<f64>() / v.len() as f64
+        };
+        let left = |v: &Vec<f64>| -> Vec<f64> {
+            v.iter()
+                .enumerate()
+                .filter(|(i, _)| i % w < w / 2)
+                .map(|(_, &x)| x)
+                .collect()
+        };
+        let after: Vec<f64> = img.pixels.iter().map(|p| p.indirect_dc).collect();
+        for (i, p) in img.pixels.iter().enumerate() {
+            if i % w >= w / 2 {
+                assert_eq!(p.indirect_dc, 0.0, "light leaked across the edge");
+                assert_eq!(p.phasor[0].re, 1.0);
+            } else {
+                // Direct part untouched: total − indirect is still 1.
+                assert!((p.phasor[0].re - p.indirect[0].re - 1.0).abs() < 1e-12);
+                assert!((p.dc - p.indirect_dc - 1.0).abs() < 1e-12);
+            }
+        }
+        assert!(var(&left(&after)) < 0.3 * var(&left(&before)));
+    }
+}
