@@ -288,10 +288,51 @@ impl Primitive {
                 return None;
             }
         }
-        let o = self.pose.to_local(ray.origin);
-        let d = self.pose.rot.apply_transpose(ray.dir);
-        let (t, n_local) = self.intersect_local(o, d, tmin, tmax)?;
-        let mut normal = self.pose.rot.apply(n_local);
+        // Planes, plates and spheres are intersected in world space (no ray transform): they
+        // are most of the tests, since room walls are always tested.
+        let (t, mut normal) = match self.shape {
+            Shape::Plane | Shape::Quad { .. } => {
+                let n = self.pose.rot.cols[2];
+                let denom = n.dot(ray.dir);
+                if denom == 0.0 {
+                    return None;
+                }
+                let t = n.dot(self.pose.pos - ray.origin) / denom;
+                if !(t > tmin && t < tmax) {
+                    return None;
+                }
+                if let Shape::Quad { hx, hy } = self.shape {
+                    let q = ray.at(t) - self.pose.pos;
+                    if q.dot(self.pose.rot.cols[0]).abs() > hx
+                        || q.dot(self.pose.rot.cols[1]).abs() > hy
+                    {
+                        return None;
+                    }
+                }
+                (t, n)
+            }
+            Shape::Sphere { radius } => {
+                let oc = ray.origin - self.pose.pos;
+                let b = oc.dot(ray.dir);
+                let c = oc.length_squared() - radius * radius;
+                let disc = b * b - c;
+                if disc < 0.0 {
+                    return None;
+                }
+                let s = disc.sqrt();
+                let t = if -b - s > tmin { -b - s } else { -b + s };
+                if !(t > tmin && t < tmax) {
+                    return None;
+                }
+                (t, (oc + ray.dir * t) / radius)
+            }
+            _ => {
+                let o = self.pose.to_local(ray.origin);
+                let d = self.pose.rot.apply_transpose(ray.dir);
+                let (t, n_local) = self.intersect_local(o, d, tmin, tmax)?;
+                (t, self.pose.rot.apply(n_local))
+            }
+        };
         if normal.dot(ray.dir) > 0.0 {
             normal = -normal;
         }
@@ -301,6 +342,15 @@ impl Primitive {
             normal,
             object: self.object,
         })
+    }
+
+    /// The same intersection computed entirely in the local frame (reference for the tests).
+    #[cfg(test)]
+    fn intersect_reference(&self, ray: &Ray, tmin: f64, tmax: f64) -> Option<(f64, Vec3)> {
+        let o = self.pose.to_local(ray.origin);
+        let d = self.pose.rot.apply_transpose(ray.dir);
+        self.intersect_local(o, d, tmin, tmax)
+            .map(|(t, n)| (t, self.pose.rot.apply(n)))
     }
 }
 
@@ -392,6 +442,9 @@ mod tests {
                 assert!(on, "{shape:?}: {l:?} not on the surface");
                 // Nothing nearer: the ray origin is outside, so the hit is the entry point.
                 assert!(h.t < 4.0 + 1e-9);
+                // The world-space fast paths agree with the local-frame computation.
+                let (tr, nr) = prim.intersect_reference(&r, 1e-9, 100.0).unwrap();
+                assert!((tr - h.t).abs() < 1e-9 && (nr.dot(h.normal).abs() - 1.0).abs() < 1e-9);
             }
         }
     }
