@@ -51,9 +51,7 @@ def draw_perturbation(
     )
 
 
-def augment(
-    rgb: np.ndarray, gt_depth: np.ndarray, perturbation: Calibration
-) -> SynthesizedView:
+def augment(rgb: np.ndarray, gt_depth: np.ndarray, perturbation: Calibration) -> SynthesizedView:
     """The RGB view and ground truth for ``perturbation`` (see the module docstring).
 
     ``rgb`` ``(H, W, 3)`` uint8 and ``gt_depth`` ``(H, W)`` metres are on the ToF grid. The

@@ -11,6 +11,7 @@ count only in ``all``. Pixels are pooled over the whole set before ranking.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 from collections.abc import Iterable
 from pathlib import Path
@@ -26,9 +27,7 @@ from dear_train.models.dear import DEAR
 MAE_RANGE_M = 4.0
 
 
-def depth_error_classes(
-    pred_err: np.ndarray, input_err: np.ndarray
-) -> dict[str, float]:
+def depth_error_classes(pred_err: np.ndarray, input_err: np.ndarray) -> dict[str, float]:
     """MAE in cm of ``pred_err`` (metres, absolute) per class of ``input_err`` quantiles."""
     if pred_err.size == 0:
         return {"low": float("nan"), "mid": float("nan"), "high": float("nan"), "all": float("nan")}
@@ -36,7 +35,7 @@ def depth_error_classes(
     n = order.size
     q = [0, n // 4, n // 2, (3 * n) // 4]
     out = {}
-    for name, (a, b) in zip(("low", "mid", "high"), zip(q[:-1], q[1:], strict=True), strict=True):
+    for name, (a, b) in zip(("low", "mid", "high"), itertools.pairwise(q), strict=True):
         sel = order[a:b]
         out[name] = float(pred_err[sel].mean() * 100) if sel.size else float("nan")
     out["all"] = float(pred_err.mean() * 100)
@@ -119,7 +118,7 @@ def evaluate(
     return metrics
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     from torch.utils.data import DataLoader
 
     from dear_train.data.dataset import DearDataset
@@ -131,7 +130,7 @@ def main() -> None:
     p.add_argument("--max-frames", type=int, default=None)
     p.add_argument("--seed", type=int, default=1234, help="seed of the synthetic misalignments")
     p.add_argument("--out", type=Path, default=None, help="also write the metrics JSON here")
-    a = p.parse_args()
+    a = p.parse_args(argv)
     model, profile = load_model(a.checkpoint)
     ds = DearDataset(a.data, crop=None, augment=profile.augment, norm=profile.norm, seed=a.seed)
     loader = DataLoader(ds, batch_size=1, shuffle=False)

@@ -154,9 +154,7 @@ def graph_specs(variant: str) -> dict[str, dict]:
         "refine": {
             "file": "refine.onnx",
             "inputs": refine_inputs,
-            "outputs": [
-                _tensor_io("depth_refined", 1, "refined depth on the RGB grid, metres")
-            ],
+            "outputs": [_tensor_io("depth_refined", 1, "refined depth on the RGB grid, metres")],
         },
     }
 
@@ -165,9 +163,9 @@ def check_inputs(variant: str, max_depth: float, percentile: float, h: int, w: i
     """Deterministic, realistic inputs for each graph (a synthetic scene at ``h × w``)."""
     scene = render_scene(np.random.default_rng(7), h, w)
     rgb = torch.from_numpy(scene["rgb"].astype(np.float32) / 255).permute(2, 0, 1)[None]
-    amp = torch.from_numpy(
-        normalize_amplitude(scene["amplitude"], scene["tof_depth"], percentile)
-    )[None, None]
+    amp = torch.from_numpy(normalize_amplitude(scene["amplitude"], scene["tof_depth"], percentile))[
+        None, None
+    ]
     depth = torch.from_numpy(scene["tof_depth"])[None, None]
     yy, xx = torch.meshgrid(torch.arange(h) / h, torch.arange(w) / w, indexing="ij")
     flow = torch.stack([6 * torch.sin(3 * xx) - 2, 4 * torch.cos(2 * yy) + 1])[None]
@@ -235,8 +233,13 @@ def export_bundle(
     extra: dict | None = None,
     check: bool = True,
     check_sizes: tuple[tuple[int, int], ...] = ((96, 128), (64, 80)),
+    macs_at: tuple[int, int] | None = (480, 640),
 ) -> dict:
-    """Export ``model`` to the bundle directory ``out``; returns the manifest it wrote."""
+    """Export ``model`` to the bundle directory ``out``; returns the manifest it wrote.
+
+    ``check`` compares every graph with PyTorch at each of ``check_sizes`` (two sizes, so the
+    dynamic H/W axes are exercised); ``macs_at`` records each graph's MACs at that ``(H, W)``.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     assert model.flow is not None and model.fusion is not None and model.refine is not None
@@ -247,8 +250,10 @@ def export_bundle(
         "refine": RefineGraph(model.refine, norm.max_depth).eval(),
     }
     specs = graph_specs(profile.variant)
-    sizes = [check_inputs(profile.variant, norm.max_depth, norm.amplitude_percentile, h, w)
-             for h, w in check_sizes]
+    sizes = [
+        check_inputs(profile.variant, norm.max_depth, norm.amplitude_percentile, h, w)
+        for h, w in check_sizes
+    ]
     graphs = {}
     for name, module in modules.items():
         path = out / specs[name]["file"]
@@ -264,9 +269,11 @@ def export_bundle(
                 "tolerance": CHECK_ATOL,
             }
         entry["params"] = param_count(module)
-        entry["gmac_at_640x480"] = round(
-            count_macs(module, lambda m=module, i=_at_vga(sizes[0][name]): m(*i)) / 1e9, 4
-        )
+        if macs_at is not None:
+            zeros = _zeros_at(sizes[0][name], macs_at)
+            entry[f"gmac_at_{macs_at[1]}x{macs_at[0]}"] = round(
+                count_macs(module, lambda m=module, z=zeros: m(*z)) / 1e9, 4
+            )
         entry["bytes"] = path.stat().st_size
         entry["sha256"] = sha256(path)
         graphs[name] = entry
@@ -280,7 +287,9 @@ def export_bundle(
         "normalisation": {
             "max_depth_m": norm.max_depth,
             "amplitude_percentile": norm.amplitude_percentile,
-            "amplitude": "clip(I_raw * D^2 / percentile(I_raw * D^2 over pixels with valid D), 0, 1)",
+            "amplitude": (
+                "clip(I_raw * D^2 / percentile(I_raw * D^2 over pixels with valid D), 0, 1)"
+            ),
             "rgb": "value / 255",
             "depth": "metres in and out of refine.onnx (the graph divides by max_depth_m itself)",
         },
@@ -298,19 +307,19 @@ def export_bundle(
     return manifest
 
 
-def _at_vga(inputs: tuple) -> tuple:
-    """Zero inputs with the channels of ``inputs`` at 480×640 (for the MAC count)."""
-    return tuple(torch.zeros(x.shape[0], x.shape[1], 480, 640) for x in inputs)
+def _zeros_at(inputs: tuple, size: tuple[int, int]) -> tuple:
+    """Zero inputs with the channels of ``inputs`` at ``size`` (for the MAC count)."""
+    return tuple(torch.zeros(x.shape[0], x.shape[1], *size) for x in inputs)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(
         prog="dear-export", description="Export a trained DEAR checkpoint to a model bundle."
     )
     p.add_argument("--checkpoint", type=Path, required=True, help="final.pt of a training run")
     p.add_argument("--out", type=Path, required=True, help="bundle directory to write")
     p.add_argument("--no-check", action="store_true", help="skip the onnxruntime comparison")
-    a = p.parse_args()
+    a = p.parse_args(argv)
     model, profile = load_model(a.checkpoint)
     ckpt = load(a.checkpoint)
     extra = {
@@ -318,10 +327,12 @@ def main() -> None:
         "validation": ckpt.get("metrics", {}),
     }
     manifest = export_bundle(model, profile, a.out, extra, check=not a.no_check)
-    for name, g in manifest["graphs"].items():
+    for _name, g in manifest["graphs"].items():
         chk = g.get("check", {}).get("max_abs_diff")
-        print(f"{a.out / g['file']}: {g['bytes']} bytes, sha256 {g['sha256'][:12]}…, "
-              f"max |onnx - torch| = {chk}")
+        print(
+            f"{a.out / g['file']}: {g['bytes']} bytes, sha256 {g['sha256'][:12]}…, "
+            f"max |onnx - torch| = {chk}"
+        )
     print(a.out / "model.json")
 
 

@@ -99,9 +99,7 @@ def _usable_weights(
     return torch.where(ok, w, torch.zeros_like(w))
 
 
-def _fit(
-    flow: torch.Tensor, a: torch.Tensor, w: torch.Tensor, ridge: float
-) -> torch.Tensor:
+def _fit(flow: torch.Tensor, a: torch.Tensor, w: torch.Tensor, ridge: float) -> torch.Tensor:
     """Centred weighted line fit ``W ≈ t·a + c`` on both axes; returns ``(N, 4)``.
 
     ``t = Σw(a−ā)(W−W̄) / Σw(a−ā)²``, ``c = W̄ − t·ā`` (the form ``dear-pipeline`` uses: centring
@@ -221,7 +219,7 @@ def convt_flow(
 
 
 def _sample_points(flow: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    n, _, h, w = flow.shape
+    _n, _, h, w = flow.shape
     ys = torch.arange(h, dtype=flow.dtype, device=flow.device).view(1, h, 1)
     xs = torch.arange(w, dtype=flow.dtype, device=flow.device).view(1, 1, w)
     return xs + flow[:, 0], ys + flow[:, 1]
@@ -259,9 +257,7 @@ def warp_bilinear(src: torch.Tensor, flow: torch.Tensor) -> tuple[torch.Tensor, 
     return out * valid, valid
 
 
-def _taps(
-    flow: torch.Tensor, hs: int, ws: int
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def _taps(flow: torch.Tensor, hs: int, ws: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Flat source indices ``(N, 4, H, W)``, weights ``(N, 4, H, W)`` and inside mask.
 
     Tap order ``(y0,x0), (y0,x1), (y1,x0), (y1,x1)`` as in ``dear-pipeline``'s ``bilinear_taps``.
@@ -313,7 +309,9 @@ def warp_depth(src: torch.Tensor, flow: torch.Tensor) -> tuple[torch.Tensor, tor
     same = ok & ((z_safe - z_ref).detach().abs() <= tol)
     wsel = wts * same
     wsum = wsel.sum(dim=1, keepdim=True)
-    out = (wsel * z_safe).sum(dim=1, keepdim=True) / torch.where(any_ok, wsum, torch.ones_like(wsum))
+    out = (wsel * z_safe).sum(dim=1, keepdim=True) / torch.where(
+        any_ok, wsum, torch.ones_like(wsum)
+    )
     out = torch.where(any_ok, out, torch.zeros_like(out))
     return out, any_ok
 
@@ -330,7 +328,9 @@ def warp_depth_np(src: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out[0, 0].numpy()
 
 
-def warp_bilinear_np(src: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def warp_bilinear_np(
+    src: np.ndarray, u: np.ndarray, v: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """NumPy front-end of :func:`warp_bilinear` for ``(H, W)`` or ``(H, W, C)`` arrays."""
     s = torch.from_numpy(np.asarray(src, dtype=np.float32))
     s = s[None, None] if s.dim() == 2 else s.permute(2, 0, 1)[None]
@@ -357,7 +357,9 @@ class SynthesizedView:
     valid: np.ndarray  # bool
 
 
-def synthesize_view(rgb: np.ndarray, depth: np.ndarray, perturbation: Calibration) -> SynthesizedView:
+def synthesize_view(
+    rgb: np.ndarray, depth: np.ndarray, perturbation: Calibration
+) -> SynthesizedView:
     """Forward-splat an aligned ``(rgb, depth)`` sample into the view of ``perturbation``.
 
     Bit-for-bit the scheme of ``dear-pipeline``'s ``synthesize_view`` (f32 arithmetic, the same

@@ -74,7 +74,10 @@ def multiscale_flow_loss(
     for pred, w in zip(preds, weights, strict=True):
         factor = max(1, round(gt.shape[-1] / pred.shape[-1]))
         g, v = downsample_flow(gt, valid, factor)
-        g, v = g[..., : pred.shape[-2], : pred.shape[-1]], v[..., : pred.shape[-2], : pred.shape[-1]]
+        g, v = (
+            g[..., : pred.shape[-2], : pred.shape[-1]],
+            v[..., : pred.shape[-2], : pred.shape[-1]],
+        )
         total = total + w * epe(pred, g, v)
     return total
 

@@ -194,7 +194,9 @@ def _open_png(path: Path) -> Image.Image:
 
 def _check_size(path: Path, arr: np.ndarray, size: tuple[int, int] | None) -> np.ndarray:
     if size is not None and arr.shape[:2] != size:
-        raise CaptureError(f"{path}: size {arr.shape[1]}×{arr.shape[0]}, expected {size[1]}×{size[0]}")
+        raise CaptureError(
+            f"{path}: size {arr.shape[1]}×{arr.shape[0]}, expected {size[1]}×{size[0]}"
+        )
     return arr
 
 

@@ -205,11 +205,8 @@ def split_items(
     there are two or more frames)."""
     items = list(dataset.items)
     order = np.random.default_rng(seed).permutation(len(items))
-    n_val = int(round(len(items) * val_fraction))
-    if len(items) >= 2:
-        n_val = min(max(n_val, 1), len(items) - 1)
-    else:
-        n_val = 0
+    n_val = round(len(items) * val_fraction)
+    n_val = min(max(n_val, 1), len(items) - 1) if len(items) >= 2 else 0
     val = [items[i] for i in sorted(order[:n_val])]
     train = [items[i] for i in sorted(order[n_val:])]
     return train, val or train

@@ -153,7 +153,7 @@ def write_synthetic_capture(
         modulation_frequencies_hz=[20e6, 100e6],
         source={"generator": "dear_train.data.synthetic", "seed": seed},
     )
-    n_mis = int(round(frames * misaligned_fraction))
+    n_mis = round(frames * misaligned_fraction)
     for i in range(frames):
         scene = render_scene(rng, height, width)
         frame = Frame(

@@ -39,7 +39,9 @@ def count_macs(model: nn.Module, run: Callable[[], object]) -> int:
         nonlocal total
         if isinstance(module, nn.Conv2d):
             kh, kw = module.kernel_size
-            total += output.numel() // output.shape[0] * module.in_channels // module.groups * kh * kw
+            total += (
+                output.numel() // output.shape[0] * module.in_channels // module.groups * kh * kw
+            )
         elif isinstance(module, nn.ConvTranspose2d):
             kh, kw = module.kernel_size
             x = inputs[0]
@@ -64,7 +66,9 @@ def count_macs(model: nn.Module, run: Callable[[], object]) -> int:
     return total
 
 
-def measure(tier: str, variant: str = "kpn", height: int = 480, width: int = 640) -> list[Complexity]:
+def measure(
+    tier: str, variant: str = "kpn", height: int = 480, width: int = 640
+) -> list[Complexity]:
     """Params and MACs per image of the flow, fusion and refinement nets of ``tier``."""
     rgb = torch.zeros(1, 3, height, width)
     one = torch.zeros(1, 1, height, width)

@@ -64,7 +64,11 @@ class DEAR(nn.Module):
         return out
 
     def refine_depth(
-        self, rgb: torch.Tensor, amplitude: torch.Tensor, tof_depth: torch.Tensor, flow: torch.Tensor
+        self,
+        rgb: torch.Tensor,
+        amplitude: torch.Tensor,
+        tof_depth: torch.Tensor,
+        flow: torch.Tensor,
     ) -> dict[str, torch.Tensor]:
         """Warp ToF depth and amplitude with ``flow`` and refine; depths in metres."""
         if self.refine is None:

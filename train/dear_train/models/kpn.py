@@ -94,7 +94,9 @@ class KernelApply(nn.Module):
             raise ValueError(f"bias must be before/after/none, not {mode.bias!r}")
         self.mode = mode
 
-    def forward(self, depth: torch.Tensor, kernel: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, depth: torch.Tensor, kernel: torch.Tensor, bias: torch.Tensor
+    ) -> torch.Tensor:
         if self.mode.normalize:
             kernel = kernel / (kernel.abs() + KERNEL_EPS).sum(dim=1, keepdim=True)
         src = depth + bias if self.mode.bias == "before" else depth

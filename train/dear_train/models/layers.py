@@ -18,7 +18,7 @@ LEAKY_SLOPE = 0.1
 
 def scaled(channels: int, width: float, minimum: int = 8) -> int:
     """Channel count after a width multiplier, never below ``minimum`` (a multiple of 4)."""
-    return max(minimum, int(round(channels * width / 4)) * 4)
+    return max(minimum, round(channels * width / 4) * 4)
 
 
 def conv(

@@ -22,8 +22,10 @@ from dear_train.training.trainer import Trainer
 
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(
-        prog="dear-train", description=__doc__.splitlines()[0],
-        formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__.split("\n", 2)[2],
+        prog="dear-train",
+        description=__doc__.splitlines()[0],
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=__doc__.split("\n", 2)[2],
     )
     p.add_argument("--profile", choices=sorted(PROFILES), default="smoke")
     p.add_argument("--data", type=Path, nargs="+", help="capture directories")

@@ -84,7 +84,7 @@ PROFILES: dict[str, Profile] = {
     "smoke": Profile(
         name="smoke",
         tier="edge",
-        crop=(64, 96),
+        crop=(48, 64),
         batch_size=2,
         stages=(
             Stage("flow", 1, 1e-3),

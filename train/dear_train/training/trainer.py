@@ -76,7 +76,9 @@ class StageLoss(nn.Module):
                     flows, gt_flow, valid, flownet_weights(len(flows))
                 )
             else:
-                out = m.forward(rgb, amp, tof) if self.stage == "finetune" else m.align(rgb, amp, tof)
+                out = (
+                    m.forward(rgb, amp, tof) if self.stage == "finetune" else m.align(rgb, amp, tof)
+                )
                 flows = out["flows_rough"]
                 assert isinstance(flows, list)
                 parts["rough"] = multiscale_flow_loss(
@@ -218,10 +220,13 @@ class Trainer:
                     total += float(loss.detach())
                     steps += 1
                     bar.set_postfix(
-                        loss=f"{float(loss.detach()):.4g}", **{k: f"{v:.3g}" for k, v in parts.items()}
+                        loss=f"{float(loss.detach()):.4g}",
+                        **{k: f"{v:.3g}" for k, v in parts.items()},
                     )
                 sched.step()
-                train_loss = distributed.mean_across_ranks(total / max(steps, 1), self.dist, self.device)
+                train_loss = distributed.mean_across_ranks(
+                    total / max(steps, 1), self.dist, self.device
+                )
                 val = {}
                 if main:
                     val = evaluate(
