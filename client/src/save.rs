@@ -260,8 +260,8 @@ impl Legend {
             far,
             ticks: Vec::new(),
         };
-        // About one label per 25 rows of bar (with the scale), at least two.
-        let wanted = (legend.bar_len() / (25 * scale)).clamp(2, 8) as usize;
+        // About one label per 18 rows of bar (2.5 glyph heights at any scale), at least two.
+        let wanted = (legend.bar_len() / (18 * scale)).clamp(2, 8) as usize;
         legend.ticks = nice_ticks(near, far, wanted);
         legend
     }
