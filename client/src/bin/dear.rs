@@ -1,1 +1,27 @@
-fn main() {}
+//! `dear`: the command-line client of `deard` (list, watch, dump). The logic lives in
+//! `client/src/cli/`; this file only parses, runs and maps the outcome to an exit status.
+
+// The CLI is compiled into the binary, not the SDK library: applications linking
+// `dear-client` should not pull clap, indicatif and the command implementations.
+#[path = "../cli/mod.rs"]
+mod cli;
+
+use std::process::ExitCode;
+
+use clap::Parser;
+
+fn main() -> ExitCode {
+    let args = cli::Cli::parse();
+    cli::init_logging();
+    match cli::run(args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) if cli::is_interrupt(&e) => {
+            eprintln!("dear: {e:#}");
+            ExitCode::from(130)
+        }
+        Err(e) => {
+            eprintln!("dear: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

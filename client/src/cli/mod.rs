@@ -1,0 +1,104 @@
+//! The `dear` command line: argument definitions and dispatch. One module per subcommand;
+//! [`stats`] is the pure per-second aggregation behind `watch`.
+
+pub mod dump;
+pub mod list;
+pub mod stats;
+pub mod watch;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+
+/// Command-line client of deard: find frame services, watch live statistics, dump frames.
+#[derive(Debug, Parser)]
+#[command(name = "dear", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Subcommands. `eval` and `record` are planned (see DESIGN.md) and will be added here.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// List the DEAR frame services on this machine, with their publishers and subscribers.
+    List,
+    /// Print live statistics of a frame service once a second: rate, latency, calibration.
+    Watch(watch::WatchArgs),
+    /// Write received frames as a capture directory (the format `deard` replays).
+    ///
+    /// Files per frame: `frames/NNNNNN.rgb.png` (the frame's RGB), `.depth.png` (its aligned
+    /// refined depth, 16-bit mm) and `.amp.png`, which holds the frame's CONFIDENCE × 257,
+    /// because deard publishes no amplitude (`capture.json` says so under `source.amplitude`).
+    /// Frame ids count from 0; timestamps are publish times relative to the first frame. Each
+    /// frame's calibration estimate is in `source.calibration_estimates` (not `perturbation`,
+    /// which is ground truth) and the daemon's own frame id and timestamps in
+    /// `source.published_frames`.
+    Dump(dump::DumpArgs),
+}
+
+/// Runs the parsed command.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::List => list::run(),
+        Command::Watch(args) => watch::run(&args),
+        Command::Dump(args) => dump::run(&args),
+    }
+}
+
+/// `RUST_LOG` controls our own diagnostics (default: warnings); iceoryx2's internal log is kept
+/// to errors unless `IOX2_LOG_LEVEL` says otherwise, since every failure it reports also
+/// reaches the user as an error naming the service.
+pub fn init_logging() {
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
+}
+
+/// The error a command returns when Ctrl-C / SIGTERM stopped it before it finished; `main`
+/// maps it to exit status 130 instead of a failure.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct Interrupted(pub String);
+
+/// Whether `e` is (or wraps) an [`Interrupted`].
+pub fn is_interrupt(e: &anyhow::Error) -> bool {
+    e.downcast_ref::<Interrupted>().is_some()
+}
+
+/// A flag set by SIGINT or SIGTERM. Commands poll it between short waits, so they finish
+/// their output (a dump's manifest, the current line) instead of dying mid-write.
+#[derive(Debug, Clone)]
+pub struct StopFlag(Arc<AtomicBool>);
+
+impl StopFlag {
+    pub fn install() -> anyhow::Result<Self> {
+        let flag = Arc::new(AtomicBool::new(false));
+        for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+            signal_hook::flag::register(signal, Arc::clone(&flag))
+                .with_context(|| format!("cannot install the handler of signal {signal}"))?;
+        }
+        Ok(StopFlag(flag))
+    }
+
+    pub fn is_set(&self) -> bool {
+        self.0.load(Ordering::Relaxed)
+    }
+}
+
+/// Service name argument shared by the subcommands: the default camera's frame service.
+pub fn default_service() -> String {
+    dear_proto::default_service_name(dear_proto::DEFAULT_CAMERA)
+}
+
+/// Checks a service name given on the command line (clap value parser).
+pub fn parse_service(name: &str) -> Result<String, String> {
+    dear_proto::validate_service_name(name)?;
+    Ok(name.to_string())
+}

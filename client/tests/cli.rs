@@ -1,0 +1,357 @@
+//! The real `dear` binary against a tiny in-test publisher speaking the frame protocol (no
+//! daemon): `dump` writes what was published, `watch` reports it, `list` finds it.
+
+use std::path::Path;
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use dear_pipeline::capture::CaptureDir;
+use dear_proto::service::{frame_event_service, frame_service, FrameEventService, FrameService};
+use dear_proto::{flags, FrameHeader, PayloadLayout, Stage};
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::*;
+
+const W: usize = 16;
+const H: usize = 12;
+/// Distinct frame contents; frame `k` carries content `k % VARIANTS`.
+const VARIANTS: u64 = 3;
+
+/// A service name no other test (or concurrent test run) uses.
+fn unique_service(test: &str) -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .subsec_nanos();
+    format!("dear/test-{test}-{}-{nanos}/frames", std::process::id())
+}
+
+fn expected_depth(k: u64, r: usize, c: usize) -> f32 {
+    if (r + c) % 7 == 0 {
+        0.0 // invalid pixels survive the dump as 0
+    } else {
+        // Sub-millimetre parts check the rounding to the 16-bit PNG.
+        0.5 + 0.25 * k as f32 + 0.0013 * (r * W + c) as f32
+    }
+}
+
+fn expected_rgb(k: u64, r: usize, c: usize, ch: usize) -> u8 {
+    ((r * W + c) * 3 + ch + 50 * k as usize) as u8
+}
+
+fn expected_confidence(k: u64, r: usize, c: usize) -> u8 {
+    ((r * W + c + 17 * k as usize) % 256) as u8
+}
+
+/// One publisher and notifier on a fresh frame service, like deard's.
+struct TestPublisher {
+    publisher: Publisher<ipc::Service, [u8], FrameHeader>,
+    notifier: Notifier<ipc::Service>,
+    layout: PayloadLayout,
+    next_id: u64,
+    _frames: FrameService,
+    _events: FrameEventService,
+    _node: Node<ipc::Service>,
+}
+
+impl TestPublisher {
+    fn new(service: &str) -> Self {
+        let node = NodeBuilder::new()
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .unwrap();
+        let frames = frame_service(&node, service).unwrap();
+        let events = frame_event_service(&node, service).unwrap();
+        let layout = PayloadLayout::new(W as u32, H as u32);
+        let publisher = frames
+            .publisher_builder()
+            .initial_max_slice_len(layout.size)
+            .create()
+            .unwrap();
+        let notifier = events.notifier_builder().create().unwrap();
+        TestPublisher {
+            publisher,
+            notifier,
+            layout,
+            next_id: 0,
+            _frames: frames,
+            _events: events,
+            _node: node,
+        }
+    }
+
+    /// Publishes frame `next_id` with the known content of its variant.
+    fn publish(&mut self) {
+        let id = self.next_id;
+        self.next_id += 1;
+        let k = id % VARIANTS;
+        let l = self.layout;
+        let mut sample = self.publisher.loan_slice(l.size).unwrap();
+        let payload = sample.payload_mut();
+        for r in 0..H {
+            for c in 0..W {
+                let p = r * W + c;
+                let d = expected_depth(k, r, c).to_ne_bytes();
+                payload[l.depth_offset + 4 * p..l.depth_offset + 4 * p + 4].copy_from_slice(&d);
+                for ch in 0..3 {
+                    payload[l.rgb_offset + 3 * p + ch] = expected_rgb(k, r, c, ch);
+                }
+                payload[l.confidence_offset + p] = expected_confidence(k, r, c);
+            }
+        }
+        let mut header = FrameHeader::new(id, W as u32, H as u32);
+        header.capture_timestamp_ns = 1_000 * id;
+        header.calib_tx = 10.0 + id as f32;
+        header.calib_cy = -2.5;
+        header.calib_residual_px = 0.25;
+        header.calib_quality = 0.75;
+        header.calib_age_frames = 3;
+        header.flags = flags::ALIGNED | flags::CALIBRATION_ONLINE;
+        header.stage_latency_us[Stage::Flow as usize] = 1_500;
+        header.stage_latency_us[Stage::Total as usize] = 4_000;
+        header.frames_dropped = id / 10;
+        header.set_bundle_name("test");
+        header.publish_timestamp_ns = dear_proto::time::monotonic_ns();
+        *sample.user_header_mut() = header;
+        sample.send().unwrap();
+        self.notifier.notify().unwrap();
+    }
+
+    /// Publishes every 20 ms until `child` exits (it may subscribe late: history is one frame),
+    /// at most for `limit`; then collects its output.
+    fn serve(&mut self, mut child: Child, limit: Duration) -> Output {
+        let deadline = Instant::now() + limit;
+        while child.try_wait().unwrap().is_none() {
+            if Instant::now() > deadline {
+                let _ = child.kill();
+                let out = child.wait_with_output().unwrap();
+                panic!(
+                    "child still running after {limit:?}; stderr: {}",
+                    String::from_utf8_lossy(&out.stderr)
+                );
+            }
+            self.publish();
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        child.wait_with_output().unwrap()
+    }
+}
+
+fn dear(args: &[&str]) -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_dear"));
+    cmd.args(args).stdout(Stdio::piped()).stderr(Stdio::piped());
+    cmd
+}
+
+fn check_success(out: &Output) {
+    assert!(
+        out.status.success(),
+        "dear failed with {}: stdout {} stderr {}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn dump_writes_the_published_frames_as_a_capture() {
+    let service = unique_service("dump");
+    let tmp = tempfile::tempdir().unwrap();
+    let out_dir = tmp.path().join("dump");
+    let mut publisher = TestPublisher::new(&service);
+    let child = dear(&[
+        "dump",
+        "--count",
+        "3",
+        "--out",
+        out_dir.to_str().unwrap(),
+        "--service",
+        &service,
+        "--timeout-s",
+        "10",
+        "--preview",
+    ])
+    .spawn()
+    .unwrap();
+    let out = publisher.serve(child, Duration::from_secs(30));
+    check_success(&out);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("wrote 3 frames"));
+
+    let capture = CaptureDir::open(&out_dir).unwrap();
+    assert_eq!(capture.len(), 3);
+    assert_eq!(capture.size(), (W as u32, H as u32));
+    let source = &capture.manifest().source;
+    assert_eq!(source["recorded_by"], "dear dump");
+    assert_eq!(source["service"], service.as_str());
+    assert!(source["amplitude"].as_str().unwrap().contains("confidence"));
+    let published = source["published_frames"].as_array().unwrap();
+    let estimates = source["calibration_estimates"].as_array().unwrap();
+    assert_eq!((published.len(), estimates.len()), (3, 3));
+
+    let mut last_daemon_id = None;
+    for i in 0..3 {
+        let frame = capture.read_frame(i).unwrap();
+        assert_eq!(frame.index, i as u64);
+        assert!(
+            frame.perturbation.is_none(),
+            "estimates are not ground truth"
+        );
+        let daemon_id = published[i]["frame_id"].as_u64().unwrap();
+        assert!(last_daemon_id < Some(daemon_id), "frames in publish order");
+        last_daemon_id = Some(daemon_id);
+        assert_eq!(published[i]["id"], i);
+        assert_eq!(published[i]["bundle"], "test");
+        let e = &estimates[i];
+        assert_eq!(e["id"], i);
+        assert_eq!(e["tx"].as_f64().unwrap(), 10.0 + daemon_id as f64);
+        assert_eq!(e["cy"].as_f64().unwrap(), -2.5);
+        assert_eq!(e["residual_px"].as_f64().unwrap(), 0.25);
+        assert_eq!(e["age_frames"], 3);
+        assert_eq!(e["online"], true);
+
+        let k = daemon_id % VARIANTS;
+        for r in 0..H {
+            for c in 0..W {
+                let want = expected_depth(k, r, c);
+                let got = frame.depth[(r, c)];
+                assert!(
+                    (got - want).abs() <= 0.0005 + 1e-6,
+                    "frame {i} depth ({r}, {c}): {got} vs {want}"
+                );
+                assert_eq!(got == 0.0, want == 0.0);
+                for ch in 0..3 {
+                    assert_eq!(frame.rgb[(r, c, ch)], expected_rgb(k, r, c, ch));
+                }
+                let amp = f32::from(expected_confidence(k, r, c)) * 257.0;
+                assert_eq!(frame.amplitude[(r, c)], amp);
+            }
+        }
+        for kind in ["depth", "blend"] {
+            let path = out_dir.join(format!("previews/{i:06}.{kind}.png"));
+            let img = image::open(&path)
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+                .into_rgb8();
+            assert!(img.width() >= W as u32 && img.height() >= H as u32);
+        }
+    }
+    let timestamps: Vec<u64> = capture
+        .manifest()
+        .frames
+        .iter()
+        .map(|f| f.timestamp_ns)
+        .collect();
+    assert_eq!(timestamps[0], 0);
+    assert!(
+        timestamps.windows(2).all(|t| t[0] <= t[1]),
+        "{timestamps:?}"
+    );
+}
+
+#[test]
+fn dump_without_a_publisher_fails_naming_the_service() {
+    let service = unique_service("dump-none");
+    let tmp = tempfile::tempdir().unwrap();
+    let out_dir = tmp.path().join("never");
+    let out = dear(&[
+        "dump",
+        "--count",
+        "2",
+        "--out",
+        out_dir.to_str().unwrap(),
+        "--service",
+        &service,
+        "--timeout-s",
+        "0.5",
+    ])
+    .output()
+    .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains(&service) && stderr.contains("no frame"),
+        "{stderr}"
+    );
+    assert!(!out_dir.exists(), "nothing is created when no frame came");
+}
+
+#[test]
+fn dump_refuses_a_non_empty_directory_before_waiting() {
+    let tmp = tempfile::tempdir().unwrap();
+    std::fs::write(tmp.path().join("keep.txt"), "x").unwrap();
+    let started = Instant::now();
+    let out = dear(&[
+        "dump",
+        "--count",
+        "1",
+        "--out",
+        tmp.path().to_str().unwrap(),
+        "--service",
+        &unique_service("dump-busy"),
+    ])
+    .output()
+    .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("not empty") && stderr.contains(&tmp.path().display().to_string()),
+        "{stderr}"
+    );
+    assert!(started.elapsed() < Duration::from_secs(5), "fails at once");
+    assert!(Path::new(&tmp.path().join("keep.txt")).exists());
+}
+
+#[test]
+fn watch_reports_each_second_as_json() {
+    let service = unique_service("watch");
+    let mut publisher = TestPublisher::new(&service);
+    let child = dear(&[
+        "watch",
+        "--service",
+        &service,
+        "--json",
+        "--count-seconds",
+        "2",
+    ])
+    .spawn()
+    .unwrap();
+    let out = publisher.serve(child, Duration::from_secs(30));
+    check_success(&out);
+    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 2);
+    // The second line covers a full second of 20 ms frames (loaded CI: allow a wide margin).
+    let last = &lines[1];
+    let fps = last["fps"].as_f64().unwrap();
+    assert!((5.0..=60.0).contains(&fps), "fps {fps}");
+    assert_eq!(last["daemon_total"]["median_ms"], 4.0);
+    let flow = last["stages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|s| s["stage"] == "flow")
+        .unwrap();
+    assert_eq!(flow["median_ms"], 1.5);
+    assert!(last["end_to_end"]["median_ms"].as_f64().unwrap() >= 0.0);
+    assert_eq!(last["calibration"]["quality"], 0.75);
+    assert_eq!(last["flags"], serde_json::json!(["aligned", "online"]));
+    assert_eq!(last["bundle"], "test");
+}
+
+#[test]
+fn list_finds_the_service_with_its_publisher() {
+    let service = unique_service("list");
+    let mut publisher = TestPublisher::new(&service);
+    publisher.publish();
+    let out = dear(&["list"]).output().unwrap();
+    check_success(&out);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let line = stdout
+        .lines()
+        .find(|l| l.split_whitespace().next() == Some(service.as_str()))
+        .unwrap_or_else(|| panic!("{service} not listed in:\n{stdout}"));
+    let columns: Vec<&str> = line.split_whitespace().collect();
+    assert_eq!(columns[1], "1", "one publisher: {line}");
+    assert_eq!(columns[2], "0", "no subscriber: {line}");
+}
