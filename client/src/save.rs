@@ -91,8 +91,16 @@ fn effective_range(depth: ArrayView2<f32>, range: Option<(f32, f32)>) -> (f32, f
 /// red. Turbo rather than viridis because its larger lightness and hue range separates nearby
 /// depths better, while, unlike jet, it has no false bands.
 fn turbo(z: f32, near: f32, far: f32) -> Rgb<u8> {
-    let t = ((z - near) / (far - near)).clamp(0.0, 1.0);
-    let c = colorous::TURBO.eval_continuous(f64::from(t));
+    turbo_at(((z - near) / (far - near)).clamp(0.0, 1.0))
+}
+
+/// Where the used part of turbo starts: its darkest tenth is almost black and would read as
+/// invalid depth, so near depth starts at a clearly blue-violet.
+const TURBO_START: f64 = 0.1;
+
+/// The colour for `t` in `[0, 1]` (near → far).
+fn turbo_at(t: f32) -> Rgb<u8> {
+    let c = colorous::TURBO.eval_continuous(TURBO_START + (1.0 - TURBO_START) * f64::from(t));
     Rgb([c.r, c.g, c.b])
 }
 
@@ -516,7 +524,7 @@ mod tests {
         depth[(1, 2)] = 9.0; // beyond the range: clamps to far
         let img = depth_colors(depth.view(), Some((1.0, 3.0)));
         let rgb = |t: f64| {
-            let c = colorous::TURBO.eval_continuous(t);
+            let c = colorous::TURBO.eval_continuous(0.1 + 0.9 * t);
             [c.r, c.g, c.b]
         };
         assert_eq!(img.get_pixel(0, 0).0, rgb(0.0));
@@ -525,9 +533,13 @@ mod tests {
         assert_eq!(img.get_pixel(0, 1).0, [0, 0, 0]);
         assert_eq!(img.get_pixel(1, 1).0, [0, 0, 0]);
         assert_eq!(img.get_pixel(2, 1).0, rgb(1.0));
-        // Valid depth is never rendered as black, so holes stay unambiguous.
-        assert_ne!(rgb(0.0), [0, 0, 0]);
-        assert_ne!(rgb(1.0), [0, 0, 0]);
+        // Valid depth is never rendered dark enough to pass for a hole.
+        for t in [0.0, 0.5, 1.0] {
+            assert!(
+                rgb(t).iter().map(|&v| u32::from(v)).sum::<u32>() > 120,
+                "{t}"
+            );
+        }
     }
 
     #[test]
@@ -568,11 +580,12 @@ mod tests {
                 .get_pixel(0, 0)
                 .0
         );
-        // The bar: far (turbo 1) at the top, near (turbo 0) at the bottom, varying in between.
+        // The bar: far (turbo 1) at the top, near (turbo 0.1, where the used part starts) at the
+        // bottom, varying in between.
         let bar_x = w as u32 + Legend::GAP + Legend::BAR / 2;
         let (top, bottom) = legend.bar_rows();
         let far = colorous::TURBO.eval_continuous(1.0);
-        let near = colorous::TURBO.eval_continuous(0.0);
+        let near = colorous::TURBO.eval_continuous(0.1);
         assert_eq!(img.get_pixel(bar_x, top).0, [far.r, far.g, far.b]);
         assert_eq!(img.get_pixel(bar_x, bottom).0, [near.r, near.g, near.b]);
         let distinct: std::collections::HashSet<_> =
