@@ -358,10 +358,11 @@ impl Dump {
         let path = dir.join(MANIFEST_FILE);
         let text = std::fs::read_to_string(&path)
             .with_context(|| format!("cannot read back {}", path.display()))?;
-        let mut manifest: Value = serde_json::from_str(&text)
+        // Through the typed manifest, so the file keeps the writer's field order.
+        let mut manifest: CaptureManifest = serde_json::from_str(&text)
             .with_context(|| format!("cannot parse {} just written", path.display()))?;
-        manifest["source"]["calibration_estimates"] = Value::Array(self.estimates);
-        manifest["source"]["published_frames"] = Value::Array(self.published);
+        manifest.source["calibration_estimates"] = Value::Array(self.estimates);
+        manifest.source["published_frames"] = Value::Array(self.published);
         let tmp = dir.join(format!("{MANIFEST_FILE}.tmp"));
         let text = serde_json::to_string_pretty(&manifest).context("cannot encode the manifest")?;
         std::fs::write(&tmp, text).with_context(|| format!("cannot write {}", tmp.display()))?;
