@@ -191,7 +191,8 @@ fn solve_moments(m: &Moments) -> Result<Calibration, LsqError> {
         return Err(LsqError::ZeroWeight);
     }
     let rel_spread = (m.saa / m.sw).sqrt() / m.mean_a;
-    if !(rel_spread >= MIN_REL_INV_DEPTH_SPREAD) {
+    // NaN (no spread at all, 0/0) counts as degenerate too.
+    if rel_spread.is_nan() || rel_spread < MIN_REL_INV_DEPTH_SPREAD {
         return Err(LsqError::Degenerate {
             rel_inv_depth_spread: rel_spread,
             mean_inv_depth: m.mean_a as f32,

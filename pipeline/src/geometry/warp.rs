@@ -10,17 +10,20 @@
 //! Shape mismatches between the flow and the output are programming errors and panic with a
 //! message naming both shapes.
 
-use ndarray::{ArrayView2, ArrayView3, ArrayViewMut1, ArrayViewMut2, ArrayViewMut3, Axis, Zip};
+use ndarray::{
+    ArrayView2, ArrayView3, ArrayViewMut1, ArrayViewMut2, ArrayViewMut3, Axis, CowArray, Dimension,
+    Ix2, Zip,
+};
 
 use crate::frame::Flow;
-use crate::geometry::surface::{is_valid_depth, same_surface};
+use crate::geometry::surface::surface_tolerance;
 
 /// The four bilinear neighbours of a sample point and their weights, in the fixed order
 /// `(y0,x0), (y0,x1), (y1,x0), (y1,x1)` (ties between equal weights go to the earlier one).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Taps {
-    /// `(row, column)` of each neighbour.
-    pub idx: [(usize, usize); 4],
+    /// Row-major flat index `row · w + column` of each neighbour.
+    pub idx: [usize; 4],
     /// Bilinear weight of each neighbour; they sum to 1.
     pub w: [f32; 4],
 }
@@ -36,14 +39,15 @@ pub(crate) fn bilinear_taps(sx: f32, sy: f32, h: usize, w: usize) -> Option<Taps
     if !(sx >= 0.0 && sx <= (w - 1) as f32 && sy >= 0.0 && sy <= (h - 1) as f32) {
         return None;
     }
-    let x0 = (sx.floor() as usize).min(w - 1);
-    let y0 = (sy.floor() as usize).min(h - 1);
+    // Non-negative here, so truncation is floor (and avoids a libm call per sample).
+    let x0 = (sx as usize).min(w - 1);
+    let y0 = (sy as usize).min(h - 1);
     let x1 = (x0 + 1).min(w - 1);
     let y1 = (y0 + 1).min(h - 1);
     let fx = sx - x0 as f32;
     let fy = sy - y0 as f32;
     Some(Taps {
-        idx: [(y0, x0), (y0, x1), (y1, x0), (y1, x1)],
+        idx: [y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1],
         w: [
             (1.0 - fx) * (1.0 - fy),
             fx * (1.0 - fy),
@@ -70,6 +74,37 @@ fn assert_flow_matches(flow: &Flow, out: (usize, usize), what: &str) {
     );
 }
 
+/// The flow planes as row-major slices (borrowed when already contiguous, as they are for
+/// every `Flow` built by this crate).
+struct FlowRows<'a> {
+    u: CowArray<'a, f32, Ix2>,
+    v: CowArray<'a, f32, Ix2>,
+}
+
+impl<'a> FlowRows<'a> {
+    fn new(flow: &'a Flow) -> Self {
+        FlowRows {
+            u: flow.u.as_standard_layout(),
+            v: flow.v.as_standard_layout(),
+        }
+    }
+
+    /// `(u, v)` of row `y`.
+    #[inline]
+    fn row(&self, y: usize) -> (&[f32], &[f32]) {
+        let w = self.u.ncols();
+        let (u, v) = (std_slice(&self.u), std_slice(&self.v));
+        (&u[y * w..(y + 1) * w], &v[y * w..(y + 1) * w])
+    }
+}
+
+/// The elements of a standard-layout array.
+#[inline]
+fn std_slice<'b, A, D: Dimension>(a: &'b CowArray<'_, A, D>) -> &'b [A] {
+    a.as_slice()
+        .expect("as_standard_layout yields a contiguous array")
+}
+
 /// Depth-aware backward warp of a depth map (metres, `0` = invalid).
 ///
 /// At each output pixel the four bilinear neighbours are examined: neighbours with zero weight
@@ -81,59 +116,68 @@ fn assert_flow_matches(flow: &Flow, out: (usize, usize), what: &str) {
 /// mid-air, and a sample next to a hole is not pulled towards zero. No valid neighbour, or a
 /// sample outside the source → `0`.
 ///
+/// A non-contiguous source is copied once into standard layout.
+///
 /// # Panics
 /// If `flow.dim() != out.dim()`.
 pub fn warp_depth(src: ArrayView2<f32>, flow: &Flow, mut out: ArrayViewMut2<f32>) {
     assert_flow_matches(flow, out.dim(), "warp_depth");
     let (h, w) = src.dim();
-    Zip::indexed(out.rows_mut())
-        .and(flow.u.rows())
-        .and(flow.v.rows())
-        .par_for_each(|y, mut out_row, u_row, v_row| {
-            for (x, ((o, &u), &v)) in out_row.iter_mut().zip(u_row).zip(v_row).enumerate() {
-                *o = match bilinear_taps(x as f32 + u, y as f32 + v, h, w) {
-                    Some(taps) => sample_depth(&src, &taps),
-                    None => 0.0,
-                };
-            }
-        });
+    let src = src.as_standard_layout();
+    let s = std_slice(&src);
+    let flow = FlowRows::new(flow);
+    Zip::indexed(out.rows_mut()).par_for_each(|y, mut out_row| {
+        let (u_row, v_row) = flow.row(y);
+        for (x, ((o, &u), &v)) in out_row.iter_mut().zip(u_row).zip(v_row).enumerate() {
+            *o = match bilinear_taps(x as f32 + u, y as f32 + v, h, w) {
+                Some(taps) => sample_depth(s, &taps),
+                None => 0.0,
+            };
+        }
+    });
 }
 
 /// The discontinuity-aware blend of [`warp_depth`] at one sample point.
+///
+/// Written with non-short-circuit tests and selects: holes and edges are irregular, and
+/// mispredicted branches, not arithmetic, dominated the cost of this function.
 #[inline]
-fn sample_depth(src: &ArrayView2<f32>, taps: &Taps) -> f32 {
+fn sample_depth(src: &[f32], taps: &Taps) -> f32 {
     let mut z = [0.0f32; 4];
-    let mut nearest: Option<usize> = None;
+    let (mut best_w, mut z_ref) = (0.0f32, 0.0f32);
     for i in 0..4 {
-        if taps.w[i] <= 0.0 {
-            continue;
-        }
         let d = src[taps.idx[i]];
-        if !is_valid_depth(d) {
-            continue;
-        }
-        z[i] = d;
-        if nearest.is_none_or(|n| taps.w[i] > taps.w[n]) {
-            nearest = Some(i);
-        }
+        let usable = (taps.w[i] > 0.0) & is_valid_depth_branchless(d);
+        z[i] = if usable { d } else { 0.0 };
+        // Strictly greater: ties go to the earlier tap.
+        let nearer = usable & (taps.w[i] > best_w);
+        best_w = if nearer { taps.w[i] } else { best_w };
+        z_ref = if nearer { d } else { z_ref };
     }
-    let Some(n) = nearest else { return 0.0 };
-    let z_ref = z[n];
+    if z_ref <= 0.0 {
+        return 0.0;
+    }
+    let tol = surface_tolerance(z_ref);
     let (mut acc, mut wsum) = (0.0f32, 0.0f32);
-    for i in 0..4 {
-        if z[i] > 0.0 && same_surface(z_ref, z[i]) {
-            acc += taps.w[i] * z[i];
-            wsum += taps.w[i];
-        }
+    for (&zi, &wi) in z.iter().zip(&taps.w) {
+        let on_surface = (zi > 0.0) & ((zi - z_ref).abs() <= tol);
+        acc += if on_surface { wi * zi } else { 0.0 };
+        wsum += if on_surface { wi } else { 0.0 };
     }
     acc / wsum
+}
+
+/// [`is_valid_depth`](crate::geometry::surface::is_valid_depth) without a short-circuit.
+#[inline]
+fn is_valid_depth_branchless(z: f32) -> bool {
+    (z > 0.0) & z.is_finite()
 }
 
 /// Plain bilinear backward warp for amplitude-like images (every source value is a
 /// measurement; non-finite values propagate).
 ///
 /// Outside the source: `out = 0` and, when a `valid` mask is given, `valid = false`; inside,
-/// `valid = true`.
+/// `valid = true`. A non-contiguous source is copied once into standard layout.
 ///
 /// # Panics
 /// If `flow.dim() != out.dim()` or the mask's shape differs from the output's.
@@ -145,16 +189,20 @@ pub fn warp_bilinear(
 ) {
     assert_flow_matches(flow, out.dim(), "warp_bilinear");
     let (h, w) = src.dim();
+    let src = src.as_standard_layout();
+    let s = std_slice(&src);
+    let flow = FlowRows::new(flow);
     let row =
         |y: usize, mut out_row: ArrayViewMut1<f32>, mut valid_row: Option<ArrayViewMut1<bool>>| {
-            let (u_row, v_row) = (flow.u.row(y), flow.v.row(y));
-            for x in 0..out_row.len() {
+            let (u_row, v_row) = flow.row(y);
+            for (x, o) in out_row.iter_mut().enumerate() {
                 let taps = bilinear_taps(x as f32 + u_row[x], y as f32 + v_row[x], h, w);
-                out_row[x] = match taps {
+                *o = match taps {
+                    // Zero-weight taps are skipped so that a NaN beyond the sample's cell cannot leak in.
                     Some(t) => (0..4)
                         .map(|i| {
                             if t.w[i] > 0.0 {
-                                t.w[i] * src[t.idx[i]]
+                                t.w[i] * s[t.idx[i]]
                             } else {
                                 0.0
                             }
@@ -183,9 +231,11 @@ pub fn warp_bilinear(
 }
 
 /// Bilinear backward warp of an 8-bit image `(H, W, C)` (RGB), rounding to the nearest level.
+/// Interpolation runs in integer fixed point with the sample position quantised to 1/256 px,
+/// which changes no output by more than one level against float bilinear.
 ///
 /// Outside the source: all channels `0` (black) and, when a `valid` mask is given,
-/// `valid = false`.
+/// `valid = false`. A non-contiguous source is copied once into standard layout.
 ///
 /// # Panics
 /// If the flow's shape differs from the output's `(H, W)`, the channel counts differ, or the
@@ -203,25 +253,36 @@ pub fn warp_rgb(
         c, oc,
         "warp_rgb: source has {c} channels but the output has {oc}"
     );
+    let src = src.as_standard_layout();
+    let s = std_slice(&src);
+    let flow = FlowRows::new(flow);
     let row =
         |y: usize, mut out_row: ArrayViewMut2<u8>, mut valid_row: Option<ArrayViewMut1<bool>>| {
-            let (u_row, v_row) = (flow.u.row(y), flow.v.row(y));
+            let (u_row, v_row) = flow.row(y);
             for x in 0..ow {
                 let taps = bilinear_taps(x as f32 + u_row[x], y as f32 + v_row[x], h, w);
+                let mut px = out_row.row_mut(x);
                 match taps {
                     Some(t) => {
-                        for ch in 0..c {
-                            let mut acc = 0.0f32;
-                            for i in 0..4 {
-                                if t.w[i] > 0.0 {
-                                    let (r, col) = t.idx[i];
-                                    acc += t.w[i] * f32::from(src[(r, col, ch)]);
-                                }
-                            }
-                            out_row[(x, ch)] = (acc + 0.5).floor().clamp(0.0, 255.0) as u8;
+                        // Fixed point: weights in units of 2⁻¹⁶ (the fractional position quantised to
+                        // 1/256 px per axis), summing to exactly 2¹⁶; round half up.
+                        let fx = (t.w[1] + t.w[3]).clamp(0.0, 1.0);
+                        let fy = (t.w[2] + t.w[3]).clamp(0.0, 1.0);
+                        let (qx, qy) = ((fx * 256.0 + 0.5) as u32, (fy * 256.0 + 0.5) as u32);
+                        let wq = [
+                            (256 - qx) * (256 - qy),
+                            qx * (256 - qy),
+                            (256 - qx) * qy,
+                            qx * qy,
+                        ];
+                        for (ch, o) in px.iter_mut().enumerate() {
+                            let acc: u32 = (0..4)
+                                .map(|i| wq[i] * u32::from(s[t.idx[i] * c + ch]))
+                                .sum();
+                            *o = ((acc + (1 << 15)) >> 16) as u8;
                         }
                     }
-                    None => out_row.row_mut(x).fill(0),
+                    None => px.fill(0),
                 }
                 if let Some(vr) = valid_row.as_mut() {
                     vr[x] = taps.is_some();
@@ -258,12 +319,12 @@ mod tests {
     #[test]
     fn taps_inside_border_and_outside() {
         let t = bilinear_taps(1.25, 0.5, 3, 4).unwrap();
-        assert_eq!(t.idx, [(0, 1), (0, 2), (1, 1), (1, 2)]);
+        assert_eq!(t.idx, [1, 2, 5, 6]);
         assert_eq!(t.w, [0.375, 0.125, 0.375, 0.125]);
         // Exactly on the last centre: inside, all weight on it.
         let t = bilinear_taps(3.0, 2.0, 3, 4).unwrap();
         assert_eq!(t.w[0], 1.0);
-        assert_eq!(t.idx[0], (2, 3));
+        assert_eq!(t.idx[0], 2 * 4 + 3);
         assert!(bilinear_taps(3.0001, 1.0, 3, 4).is_none());
         assert!(bilinear_taps(-0.0001, 1.0, 3, 4).is_none());
         assert!(bilinear_taps(f32::NAN, 1.0, 3, 4).is_none());
