@@ -23,7 +23,7 @@ impl Frame {
     /// Wraps a sample after checking its header against its payload.
     pub(crate) fn new(sample: Sample<ipc::Service, [u8], FrameHeader>) -> Result<Self, String> {
         let layout = sample.user_header().validate(sample.payload().len())?;
-        if sample.payload().as_ptr() as usize % std::mem::align_of::<f32>() != 0 {
+        if !(sample.payload().as_ptr() as usize).is_multiple_of(std::mem::align_of::<f32>()) {
             return Err("payload is not aligned for f32 depth".into());
         }
         Ok(Frame { sample, layout })

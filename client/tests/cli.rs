@@ -27,7 +27,7 @@ fn unique_service(test: &str) -> String {
 }
 
 fn expected_depth(k: u64, r: usize, c: usize) -> f32 {
-    if (r + c) % 7 == 0 {
+    if (r + c).is_multiple_of(7) {
         0.0 // invalid pixels survive the dump as 0
     } else {
         // Sub-millimetre parts check the rounding to the 16-bit PNG.

@@ -94,10 +94,20 @@ impl Default for CaptureConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PipelineConfig {
-    /// `"classical"` (edge-aware filter, the default without a model bundle) or `"none"`
-    /// (alignment only).
+    /// `"dear"`: the DEAR chain with the model bundle `bundle`;
+    /// `"classical"` (the default until a trained bundle ships): static calibration + the
+    /// edge-aware filter, no networks;
+    /// `"none"`: static calibration, alignment only.
     pub refine: RefineMode,
-    /// Static calibration to align with; none = the capture's `initial_calibration`.
+    /// Model bundle directory for `refine = "dear"`, relative to the working directory.
+    pub bundle: PathBuf,
+    /// With `refine = "dear"`: how the calibration is kept up to date.
+    pub calibration: CalibrationMode,
+    /// With `calibration = "online"`: frames between runs of the rough-flow network (it also
+    /// runs early when the alignment residual grows).
+    pub online_interval_frames: u32,
+    /// Static calibration for `classical`/`none`, and the DEAR engine's fallback before its
+    /// first estimate; none = the capture's `initial_calibration`.
     pub static_calibration: Option<Calibration>,
 }
 
@@ -105,6 +115,9 @@ impl Default for PipelineConfig {
     fn default() -> Self {
         PipelineConfig {
             refine: RefineMode::Classical,
+            bundle: PathBuf::from("models/edge"),
+            calibration: CalibrationMode::Online,
+            online_interval_frames: 30,
             static_calibration: None,
         }
     }
@@ -114,8 +127,20 @@ impl Default for PipelineConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum RefineMode {
+    Dear,
     Classical,
     None,
+}
+
+/// How the DEAR engine estimates the calibration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CalibrationMode {
+    /// Run the flow network every `online_interval_frames` (or when the residual grows) and
+    /// align the frames between with the filtered estimate: real-time on small devices.
+    Online,
+    /// The paper's chain on every frame: flow network, least squares, fusion.
+    EveryFrame,
 }
 
 /// Process-level behaviour.
@@ -174,6 +199,9 @@ impl Config {
                     self.capture.start
                 ));
             }
+        }
+        if self.pipeline.online_interval_frames == 0 {
+            return Err("[pipeline] online_interval_frames must be at least 1".into());
         }
         if !(self.runtime.stats_interval_s > 0.0 && self.runtime.stats_interval_s.is_finite()) {
             return Err(format!(

@@ -6,7 +6,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use clap::Parser;
-use deard::config::{Config, Pacing, RefineMode};
+use deard::config::{CalibrationMode, Config, Pacing, RefineMode};
 
 /// DEAR daemon: aligned, refined ToF depth for every app on the machine, over shared memory.
 #[derive(Debug, Parser)]
@@ -36,9 +36,18 @@ struct Cli {
     /// One past the last frame position ([capture] end).
     #[arg(long)]
     end: Option<usize>,
-    /// Refinement: classical or none ([pipeline] refine).
+    /// Refinement: dear, classical or none ([pipeline] refine).
     #[arg(long, value_parser = parse_refine)]
     refine: Option<RefineMode>,
+    /// Model bundle directory for --refine dear ([pipeline] bundle).
+    #[arg(long)]
+    bundle: Option<PathBuf>,
+    /// Calibration with a bundle: online or every-frame ([pipeline] calibration).
+    #[arg(long, value_parser = parse_calibration)]
+    calibration: Option<CalibrationMode>,
+    /// Frames between rough-flow runs in online mode ([pipeline] online_interval_frames).
+    #[arg(long)]
+    online_interval: Option<u32>,
     /// Exit when a non-looping replay ends ([runtime] exit_when_done).
     #[arg(long)]
     exit_when_done: bool,
@@ -60,9 +69,20 @@ fn parse_pacing(s: &str) -> Result<Pacing, String> {
 
 fn parse_refine(s: &str) -> Result<RefineMode, String> {
     match s {
+        "dear" => Ok(RefineMode::Dear),
         "classical" => Ok(RefineMode::Classical),
         "none" => Ok(RefineMode::None),
-        _ => Err(format!("{s:?}: expected \"classical\" or \"none\"")),
+        _ => Err(format!(
+            "{s:?}: expected \"dear\", \"classical\" or \"none\""
+        )),
+    }
+}
+
+fn parse_calibration(s: &str) -> Result<CalibrationMode, String> {
+    match s {
+        "online" => Ok(CalibrationMode::Online),
+        "every-frame" => Ok(CalibrationMode::EveryFrame),
+        _ => Err(format!("{s:?}: expected \"online\" or \"every-frame\"")),
     }
 }
 
@@ -94,6 +114,15 @@ fn effective_config(cli: &Cli) -> Result<Config, String> {
     }
     if let Some(refine) = cli.refine {
         config.pipeline.refine = refine;
+    }
+    if let Some(bundle) = &cli.bundle {
+        config.pipeline.bundle = bundle.clone();
+    }
+    if let Some(calibration) = cli.calibration {
+        config.pipeline.calibration = calibration;
+    }
+    if let Some(n) = cli.online_interval {
+        config.pipeline.online_interval_frames = n;
     }
     if cli.exit_when_done {
         config.runtime.exit_when_done = true;

@@ -1,19 +1,26 @@
 //! What the daemon does to each frame, writing straight into the output planes it is given
-//! (the loaned shared-memory sample): align the ToF depth to the RGB grid with the current
-//! calibration, then refine it.
+//! (the loaned shared-memory sample).
 //!
-//! Until a model bundle is configured this is the *static* pipeline: the static calibration and
-//! the classical edge-aware filter (`dear_pipeline::filter`).
+//! Two engines:
+//! - **DEAR** (a model bundle is configured): the paper's chain from `dear_pipeline::dear`
+//!   (rough flow → calibration → fusion → warp → ToF-KPN), with the calibration kept up to date
+//!   online (`dear_pipeline::online`): the rough-flow network runs every N frames or when the
+//!   alignment residual grows, and the filtered estimate aligns the frames in between;
+//! - **static** (no bundle): align with the static calibration, then the classical edge-aware
+//!   filter (`dear_pipeline::filter`).
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use dear_pipeline::align::StaticAligner;
+use dear_pipeline::dear::{ChainInput, ChainMode, ChainOutput, DearChain};
 use dear_pipeline::filter::ClassicalRefiner;
+use dear_pipeline::model::ModelBundle;
+use dear_pipeline::online::{OnlineCalibrator, OnlineConfig};
 use dear_pipeline::{Calibration, RgbdFrame};
 use dear_proto::{flags, FrameHeader, Stage};
 use ndarray::{Array2, ArrayViewMut2, ArrayViewMut3};
 
-use crate::config::RefineMode;
+use crate::config::{CalibrationMode, PipelineConfig, RefineMode};
 
 /// The output planes of one frame (views over the shared-memory payload).
 pub struct FrameOutput<'a> {
@@ -25,40 +32,104 @@ pub struct FrameOutput<'a> {
     pub confidence: ArrayViewMut2<'a, u8>,
 }
 
+// The DEAR chain is boxed already; the static engine is the small common case.
+#[allow(clippy::large_enum_variant)]
+enum Engine {
+    Static {
+        aligner: StaticAligner,
+        aligned: Array2<f32>,
+        refiner: Option<ClassicalRefiner>,
+    },
+    Dear {
+        chain: Box<DearChain>,
+        online: Option<OnlineCalibrator>,
+        bundle_name: String,
+    },
+}
+
 /// Per-stream processing state (scratch buffers sized for the stream).
 pub struct Processor {
     width: usize,
     height: usize,
+    /// The static calibration (and the DEAR engine's fallback before its first estimate).
     calibration: Calibration,
-    aligner: StaticAligner,
-    aligned: Array2<f32>,
-    refiner: Option<ClassicalRefiner>,
+    engine: Engine,
 }
 
 impl Processor {
-    /// A processor for `width`×`height` frames aligned with `calibration`.
-    pub fn new(width: u32, height: u32, calibration: Calibration, refine: RefineMode) -> Self {
+    /// The static engine for `width`×`height` frames aligned with `calibration`, refined with
+    /// the classical filter (`refine = Classical`) or not at all.
+    pub fn new_static(
+        width: u32,
+        height: u32,
+        calibration: Calibration,
+        refine: RefineMode,
+    ) -> Self {
         let (w, h) = (width as usize, height as usize);
         Processor {
             width: w,
             height: h,
             calibration,
-            aligner: StaticAligner::new(h, w),
-            aligned: Array2::zeros((h, w)),
-            refiner: match refine {
-                RefineMode::Classical => Some(ClassicalRefiner::default()),
-                RefineMode::None => None,
+            engine: Engine::Static {
+                aligner: StaticAligner::new(h, w),
+                aligned: Array2::zeros((h, w)),
+                refiner: match refine {
+                    RefineMode::Classical | RefineMode::Dear => Some(ClassicalRefiner::default()),
+                    RefineMode::None => None,
+                },
             },
         }
     }
 
-    /// The calibration frames are aligned with.
+    /// The engine the configuration asks for. Loading a bundle verifies it (checksums, graph
+    /// inputs) and optimises its graphs for the stream size; any problem is a start-up error.
+    pub fn from_config(
+        width: u32,
+        height: u32,
+        calibration: Calibration,
+        config: &PipelineConfig,
+    ) -> Result<Self, String> {
+        if config.refine != RefineMode::Dear {
+            return Ok(Self::new_static(width, height, calibration, config.refine));
+        }
+        let dir = &config.bundle;
+        let bundle = ModelBundle::load(dir).map_err(|e| {
+            format!("cannot load the model bundle {}: {e} (set [pipeline] bundle / --bundle, or run without networks: --refine classical)", dir.display())
+        })?;
+        let chain = DearChain::new(&bundle, width as usize, height as usize).map_err(|e| {
+            format!(
+                "cannot prepare the model bundle {} for {width}x{height}: {e}",
+                dir.display()
+            )
+        })?;
+        let online = match config.calibration {
+            CalibrationMode::Online => Some(OnlineCalibrator::new(OnlineConfig {
+                interval_frames: config.online_interval_frames,
+                ..OnlineConfig::default()
+            })),
+            CalibrationMode::EveryFrame => None,
+        };
+        let manifest = bundle.manifest();
+        let bundle_name = format!("{}/{}", manifest.tier, manifest.variant);
+        Ok(Processor {
+            width: width as usize,
+            height: height as usize,
+            calibration,
+            engine: Engine::Dear {
+                chain: Box::new(chain),
+                online,
+                bundle_name,
+            },
+        })
+    }
+
+    /// The static calibration.
     pub fn calibration(&self) -> Calibration {
         self.calibration
     }
 
-    /// Processes `frame` into `out` and fills the header's calibration, flags and the
-    /// warp/refine latencies. A frame of the wrong size is an error (the caller skips it).
+    /// Processes `frame` into `out` and fills the header's calibration, flags and stage
+    /// latencies. A frame of the wrong size is an error (the caller skips and counts it).
     pub fn process_into(
         &mut self,
         frame: &RgbdFrame,
@@ -71,52 +142,134 @@ impl Processor {
             || frame.amplitude.dim() != (h, w)
         {
             return Err(format!(
-                "frame {} is {}x{} (rgb {:?}), the stream is {}x{}",
+                "frame {} is {}x{} (rgb {:?}, amplitude {:?}), the stream is {}x{}",
                 frame.index,
                 w,
                 h,
                 frame.rgb.dim(),
+                frame.amplitude.dim(),
                 self.width,
                 self.height
             ));
         }
-        let calib = self.calibration;
-        header.calib_tx = calib.tx;
-        header.calib_ty = calib.ty;
-        header.calib_cx = calib.cx;
-        header.calib_cy = calib.cy;
-        header.calib_residual_px = f32::NAN;
-        header.calib_quality = 0.0;
-        header.calib_age_frames = 0;
-        header.flags = flags::ALIGNED;
-
-        let t = Instant::now();
         out.rgb.assign(&frame.rgb);
-        match &mut self.refiner {
-            Some(refiner) => {
-                self.aligner
-                    .align_into(frame.depth.view(), &calib, self.aligned.view_mut());
-                header.stage_latency_us[Stage::Warp as usize] = micros(t);
+        match &mut self.engine {
+            Engine::Static {
+                aligner,
+                aligned,
+                refiner,
+            } => {
+                set_calibration(header, self.calibration);
+                header.calib_residual_px = f32::NAN;
+                header.calib_quality = 0.0;
+                header.calib_age_frames = 0;
+                header.flags = flags::ALIGNED;
                 let t = Instant::now();
-                refiner.refine_into(
-                    self.aligned.view(),
-                    frame.rgb.view(),
-                    out.depth.view_mut(),
-                    out.confidence.view_mut(),
-                );
-                header.stage_latency_us[Stage::Refine as usize] = micros(t);
-                header.flags |= flags::REFINED_CLASSICAL;
+                match refiner {
+                    Some(refiner) => {
+                        aligner.align_into(
+                            frame.depth.view(),
+                            &self.calibration,
+                            aligned.view_mut(),
+                        );
+                        header.stage_latency_us[Stage::Warp as usize] = micros(t);
+                        let t = Instant::now();
+                        refiner.refine_into(
+                            aligned.view(),
+                            frame.rgb.view(),
+                            out.depth.view_mut(),
+                            out.confidence.view_mut(),
+                        );
+                        header.stage_latency_us[Stage::Refine as usize] = micros(t);
+                        header.flags |= flags::REFINED_CLASSICAL;
+                    }
+                    None => {
+                        aligner.align_into(
+                            frame.depth.view(),
+                            &self.calibration,
+                            out.depth.view_mut(),
+                        );
+                        out.confidence
+                            .zip_mut_with(&out.depth, |c, &z| *c = if z > 0.0 { 255 } else { 0 });
+                        header.stage_latency_us[Stage::Warp as usize] = micros(t);
+                    }
+                }
             }
-            None => {
-                self.aligner
-                    .align_into(frame.depth.view(), &calib, out.depth.view_mut());
-                out.confidence
-                    .zip_mut_with(&out.depth, |c, &z| *c = if z > 0.0 { 255 } else { 0 });
-                header.stage_latency_us[Stage::Warp as usize] = micros(t);
+            Engine::Dear {
+                chain,
+                online,
+                bundle_name,
+            } => {
+                let decision = online.as_mut().map(OnlineCalibrator::begin_frame);
+                let mode = match decision {
+                    Some(d) => match (d.run_network, d.calibration) {
+                        (None, Some(estimate)) => ChainMode::Cached(estimate),
+                        _ => ChainMode::Full,
+                    },
+                    None => ChainMode::Full,
+                };
+                let input = ChainInput {
+                    rgb: frame.rgb.view(),
+                    amplitude: frame.amplitude.view(),
+                    depth: frame.depth.view(),
+                };
+                let output = ChainOutput {
+                    depth: out.depth.view_mut(),
+                    confidence: out.confidence.view_mut(),
+                };
+                let report = chain
+                    .process(input, mode, output)
+                    .map_err(|e| format!("frame {}: {e}", frame.index))?;
+                let fit = report
+                    .measurement
+                    .as_ref()
+                    .and_then(|m| m.as_ref().ok())
+                    .copied();
+                header.flags = flags::ALIGNED | flags::REFINED_NETWORK;
+                if report.ran_flow_network {
+                    header.flags |= flags::CALIBRATION_ESTIMATED;
+                }
+                header.set_bundle_name(bundle_name);
+                match online {
+                    Some(online) => {
+                        online.end_frame(report.measurement.clone(), report.alignment_residual);
+                        header.flags |= flags::CALIBRATION_ONLINE;
+                        // Until the first estimate is established, publish what aligned this frame.
+                        let calibration = online
+                            .estimate()
+                            .or(report.calibration)
+                            .unwrap_or(self.calibration);
+                        set_calibration(header, calibration);
+                        header.calib_quality = online.quality();
+                        header.calib_age_frames = online
+                            .frames_since_estimate()
+                            .map_or(u32::MAX, |f| f.min(u32::MAX as u64) as u32);
+                    }
+                    None => {
+                        set_calibration(header, report.calibration.unwrap_or(self.calibration));
+                        header.calib_quality = fit.map_or(0.0, |m| m.inlier_fraction);
+                        header.calib_age_frames = 0;
+                    }
+                }
+                header.calib_residual_px = fit.map_or(f32::NAN, |m| m.rms_residual_px);
+                let t = &report.timings;
+                let us = |d: Duration| d.as_micros().min(u32::MAX as u128) as u32;
+                header.stage_latency_us[Stage::Preprocess as usize] = us(t.preprocess);
+                header.stage_latency_us[Stage::Flow as usize] = us(t.flow + t.calibrate);
+                header.stage_latency_us[Stage::Fuse as usize] = us(t.fuse);
+                header.stage_latency_us[Stage::Warp as usize] = us(t.warp);
+                header.stage_latency_us[Stage::Refine as usize] = us(t.refine + t.residual);
             }
         }
         Ok(())
     }
+}
+
+fn set_calibration(header: &mut FrameHeader, c: Calibration) {
+    header.calib_tx = c.tx;
+    header.calib_ty = c.ty;
+    header.calib_cx = c.cx;
+    header.calib_cy = c.cy;
 }
 
 /// Microseconds since `t`, saturating.

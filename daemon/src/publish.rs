@@ -119,7 +119,9 @@ impl FramePublisher {
 /// starts at offset 0 with a length of `4·pixels`, so this cannot fail unless the service was
 /// created with another alignment.
 fn bytes_as_f32(bytes: &mut [u8]) -> Result<&mut [f32], String> {
-    if bytes.as_ptr() as usize % std::mem::align_of::<f32>() != 0 || bytes.len() % 4 != 0 {
+    if !(bytes.as_ptr() as usize).is_multiple_of(std::mem::align_of::<f32>())
+        || !bytes.len().is_multiple_of(4)
+    {
         return Err("the shared-memory payload is not aligned for f32".into());
     }
     // SAFETY: alignment and length checked above; every byte pattern is a valid f32; the

@@ -29,10 +29,10 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
         .static_calibration
         .unwrap_or_else(|| source.initial_calibration());
     let service = config.service.service_name();
-    tracing::info!(source = %source.describe(), %service, width, height, ?calibration, refine = ?config.pipeline.refine, "starting");
+    tracing::info!(source = %source.describe(), %service, width, height, ?calibration, bundle = ?config.pipeline.bundle, refine = ?config.pipeline.refine, "starting");
 
     let publisher = FramePublisher::new(&service, width, height)?;
-    let mut processor = Processor::new(width, height, calibration, config.pipeline.refine);
+    let mut processor = Processor::from_config(width, height, calibration, &config.pipeline)?;
     let overflow = match config.capture.pacing {
         Pacing::Timestamps => Overflow::DropOldest,
         Pacing::Fast => Overflow::Block,

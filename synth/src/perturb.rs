@@ -155,8 +155,10 @@ pub fn perturb_dir(
     let dir = CaptureDir::open(input).with_context(|| format!("opening {}", input.display()))?;
     let src = dir.manifest().clone();
     ensure!(
-        src.frames.iter().all(|f| f.perturbation.is_none()),
-        "{} is already misaligned (frames carry perturbations)",
+        src.frames
+            .iter()
+            .all(|f| f.perturbation.is_none_or(|p| p == Calibration::default())),
+        "{} is already misaligned (frames carry non-zero perturbations)",
         input.display()
     );
     let mut manifest = src.clone();

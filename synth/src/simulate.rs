@@ -1,7 +1,7 @@
 //! One simulated sample: render the scene, run the sensor, tone-map the RGB image, and package
 //! everything as a `dear_pipeline` [`RgbdFrame`] on the ToF grid (an *aligned* sample).
 
-use dear_pipeline::RgbdFrame;
+use dear_pipeline::{Calibration, RgbdFrame};
 use ndarray::{Array2, Array3};
 use serde::{Deserialize, Serialize};
 
@@ -82,7 +82,9 @@ pub fn simulate(scene: &Scene, cfg: &SimConfig, seed: u64, frame: u64) -> Sample
 }
 
 impl Sample {
-    /// The sample as a frame of the capture format (aligned: no flow, no perturbation).
+    /// The sample as a frame of the capture format. It is aligned by construction, so its
+    /// perturbation is recorded as exactly zero (training treats a frame without a known
+    /// perturbation as unusable) and it has no flow file.
     pub fn into_frame(self, index: u64, timestamp_ns: u64) -> RgbdFrame {
         RgbdFrame {
             index,
@@ -93,7 +95,7 @@ impl Sample {
             gt_depth: Some(self.gt_depth),
             mask: Some(self.mask),
             flow: None,
-            perturbation: None,
+            perturbation: Some(Calibration::default()),
         }
     }
 }

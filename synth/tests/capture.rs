@@ -2,6 +2,7 @@
 //! sequence, checking contents, not only that files appear.
 
 use dear_pipeline::capture::CaptureDir;
+use dear_pipeline::Calibration;
 use dear_synth::dataset::{generate, GenerateParams};
 use dear_synth::perturb::{perturb_dir, PerturbMode};
 use dear_synth::scene::SceneConfig;
@@ -61,7 +62,7 @@ fn generate_then_perturb_round_trips_with_exact_flow() {
             amax > 500.0,
             "amplitude barely uses the 16-bit range: {amax}"
         );
-        assert!(f.perturbation.is_none() && f.flow.is_none());
+        assert!(f.perturbation == Some(Calibration::default()) && f.flow.is_none());
     }
 
     let misaligned = tmp.path().join("sigma2");

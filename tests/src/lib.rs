@@ -18,16 +18,21 @@ use std::collections::BTreeMap;
 
 use dear_pipeline::capture::CaptureDir;
 use dear_proto::{FrameHeader, PayloadLayout};
-use deard::config::RefineMode;
+use deard::config::PipelineConfig;
 use deard::processing::{FrameOutput, Processor};
 use ndarray::{Array2, Array3};
 
-/// What the daemon must publish for each readable frame of `capture` (frame id → SHA-256 of
-/// the payload), computed in this process by the same `deard` processing code.
-pub fn expected_payload_hashes(capture: &CaptureDir, refine: RefineMode) -> BTreeMap<u64, String> {
+/// What the daemon configured with `pipeline` must publish for each readable frame of
+/// `capture` (frame id → SHA-256 of the payload), computed in this process by the same `deard`
+/// processing code (frames in order, so the online calibrator sees what the daemon sees).
+pub fn expected_payload_hashes(
+    capture: &CaptureDir,
+    pipeline: &PipelineConfig,
+) -> BTreeMap<u64, String> {
     let (w, h) = capture.size();
     let calibration = capture.manifest().initial_calibration;
-    let mut processor = Processor::new(w, h, calibration, refine);
+    let mut processor =
+        Processor::from_config(w, h, calibration, pipeline).expect("the pipeline configuration");
     let layout = PayloadLayout::new(w, h);
     let mut hashes = BTreeMap::new();
     for position in 0..capture.len() {

@@ -100,6 +100,10 @@ pub struct Seen {
     pub skipped: u64,
     pub dropped: u64,
     pub sha256: String,
+    /// `FrameHeader::flags`.
+    pub flags: u32,
+    /// The model bundle named in the header, `-` for none.
+    pub bundle: String,
 }
 
 impl Probe {
@@ -131,13 +135,15 @@ impl Probe {
     pub fn next(&self, timeout: Duration) -> Option<Seen> {
         let line = self.lines.recv_timeout(timeout).ok()?;
         let parts: Vec<&str> = line.split_whitespace().collect();
-        assert_eq!(parts.len(), 5, "bad probe line {line:?}");
+        assert_eq!(parts.len(), 7, "bad probe line {line:?}");
         assert_eq!(parts[0], "frame");
         Some(Seen {
             frame_id: parts[1].parse().unwrap(),
             skipped: parts[2].parse().unwrap(),
             dropped: parts[3].parse().unwrap(),
             sha256: parts[4].to_string(),
+            flags: u32::from_str_radix(parts[5], 16).unwrap(),
+            bundle: parts[6].to_string(),
         })
     }
 

@@ -45,7 +45,7 @@ pub fn frame(i: u64, w: usize, h: usize) -> RgbdFrame {
     let depth = Array2::from_shape_fn((h, w), |(r, c)| {
         // A deterministic "noise" pattern and a few invalid pixels, as a real sensor has.
         let noise = (((r * 31 + c * 17 + i as usize * 7) % 13) as f32 - 6.0) * 0.002;
-        if (r * 7 + c * 3 + i as usize) % 97 == 0 {
+        if (r * 7 + c * 3 + i as usize).is_multiple_of(97) {
             0.0
         } else {
             depth_at(r, c) + noise
@@ -54,8 +54,7 @@ pub fn frame(i: u64, w: usize, h: usize) -> RgbdFrame {
     let rgb = Array3::from_shape_fn((h, w, 3), |(r, c, k)| {
         let checker = ((r / 8 + c / 8) % 2) as u8;
         let base: u8 = if depth_at(r, c) < 1.0 { 150 } else { 60 };
-        (base as u8)
-            .wrapping_add(40 * checker + 15 * k as u8)
+        base.wrapping_add(40 * checker + 15 * k as u8)
             .wrapping_add(i as u8)
     });
     let amplitude = depth.mapv(|z| {

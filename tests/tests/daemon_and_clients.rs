@@ -5,7 +5,8 @@ use std::time::Duration;
 use dear_e2e_tests::processes::{unique_service, Daemon, Probe};
 use dear_e2e_tests::{expected_payload_hashes, scene};
 use dear_pipeline::Calibration;
-use deard::config::RefineMode;
+use dear_proto::flags;
+use deard::config::{PipelineConfig, RefineMode};
 
 const W: u32 = 160;
 const H: u32 = 120;
@@ -20,18 +21,92 @@ fn calibration() -> Calibration {
     }
 }
 
+fn classical() -> PipelineConfig {
+    PipelineConfig {
+        refine: RefineMode::Classical,
+        ..PipelineConfig::default()
+    }
+}
+
+/// The untrained bundle of the same architecture as `models/edge` (fixtures/README.md).
+fn fixture_bundle() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/bundles/smoke-edge")
+}
+
+#[test]
+fn with_a_bundle_the_daemon_publishes_the_dear_chain_output_with_online_calibration() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = scene::write_capture(&tmp.path().join("cap"), 8, W, H, calibration());
+    let bundle = fixture_bundle();
+    let pipeline = PipelineConfig {
+        refine: RefineMode::Dear,
+        bundle: bundle.clone(),
+        online_interval_frames: 3,
+        ..PipelineConfig::default()
+    };
+    let expected = expected_payload_hashes(&capture, &pipeline);
+    assert_eq!(expected.len(), 8);
+    let service = unique_service("dear-bundle");
+    let probe = Probe::start(&service, 8);
+    let mut daemon = Daemon::start(
+        &service,
+        &[
+            "--refine",
+            "dear",
+            "--bundle",
+            bundle.to_str().unwrap(),
+            "--online-interval",
+            "3",
+            "--pacing",
+            "fast",
+            "--replay",
+            capture.root().to_str().unwrap(),
+        ],
+        &tmp.path().join("deard.log"),
+    );
+    let seen = probe.take(8, WAIT);
+    for s in &seen {
+        assert_eq!(
+            s.sha256,
+            expected[&s.frame_id],
+            "frame {} differs from the in-process DEAR chain\n{}",
+            s.frame_id,
+            daemon.log_text()
+        );
+        let want = flags::ALIGNED | flags::REFINED_NETWORK | flags::CALIBRATION_ONLINE;
+        assert_eq!(
+            s.flags & want,
+            want,
+            "frame {} flags {:x}",
+            s.frame_id,
+            s.flags
+        );
+        assert_eq!(s.flags & flags::REFINED_CLASSICAL, 0);
+        assert!(s.bundle.starts_with("edge/"), "bundle name {:?}", s.bundle);
+    }
+    // The first frame has no estimate yet, so the rough-flow network runs on it. (How often it
+    // runs after that depends on whether the untrained fixture's measurements pass the gate.)
+    assert_ne!(seen[0].flags & flags::CALIBRATION_ESTIMATED, 0);
+    assert!(daemon.terminate(WAIT).expect("stops").success());
+}
+
 #[test]
 fn two_clients_receive_every_frame_in_order_with_the_pipeline_output() {
     let tmp = tempfile::tempdir().unwrap();
     let capture = scene::write_capture(&tmp.path().join("cap"), 12, W, H, calibration());
-    let expected = expected_payload_hashes(&capture, RefineMode::Classical);
+    let expected = expected_payload_hashes(&capture, &classical());
     assert_eq!(expected.len(), 12);
     let service = unique_service("two-clients");
     let a = Probe::start(&service, 12);
     let b = Probe::start(&service, 12);
     let mut daemon = Daemon::start(
         &service,
-        &["--replay", capture.root().to_str().unwrap()],
+        &[
+            "--refine",
+            "classical",
+            "--replay",
+            capture.root().to_str().unwrap(),
+        ],
         &tmp.path().join("deard.log"),
     );
     for probe in [&a, &b] {
@@ -69,7 +144,12 @@ fn killing_a_client_disturbs_neither_the_daemon_nor_the_other_client() {
     let mut victim = Probe::start(&service, 1000);
     let mut daemon = Daemon::start(
         &service,
-        &["--replay", capture.root().to_str().unwrap()],
+        &[
+            "--refine",
+            "classical",
+            "--replay",
+            capture.root().to_str().unwrap(),
+        ],
         &tmp.path().join("deard.log"),
     );
     let before = victim.take(5, WAIT);
@@ -94,20 +174,20 @@ fn killing_a_client_disturbs_neither_the_daemon_nor_the_other_client() {
 fn a_restarted_daemon_is_picked_up_by_a_running_client() {
     let tmp = tempfile::tempdir().unwrap();
     let capture = scene::write_capture(&tmp.path().join("cap"), 16, W, H, calibration());
-    let expected = expected_payload_hashes(&capture, RefineMode::Classical);
+    let expected = expected_payload_hashes(&capture, &classical());
     let service = unique_service("restart");
     let root = capture.root().to_str().unwrap();
     let probe = Probe::start(&service, 16);
     let mut first = Daemon::start(
         &service,
-        &["--replay", root, "--end", "8"],
+        &["--refine", "classical", "--replay", root, "--end", "8"],
         &tmp.path().join("deard1.log"),
     );
     let seen_first = probe.take(8, WAIT);
     first.crash();
     let mut second = Daemon::start(
         &service,
-        &["--replay", root, "--start", "8"],
+        &["--refine", "classical", "--replay", root, "--start", "8"],
         &tmp.path().join("deard2.log"),
     );
     let seen_second = probe.take(8, WAIT);
@@ -136,13 +216,18 @@ fn bad_frames_are_skipped_counted_and_named() {
     let wrong_size = capture.frame_paths(7).depth;
     let small = ndarray::Array2::<f32>::from_elem((H as usize / 2, W as usize / 2), 1.0);
     dear_pipeline::capture::png::write_depth(&wrong_size, small.view(), 0.001).unwrap();
-    let expected = expected_payload_hashes(&capture, RefineMode::Classical);
+    let expected = expected_payload_hashes(&capture, &classical());
 
     let service = unique_service("bad-frames");
     let probe = Probe::start(&service, 7);
     let mut daemon = Daemon::start(
         &service,
-        &["--replay", capture.root().to_str().unwrap()],
+        &[
+            "--refine",
+            "classical",
+            "--replay",
+            capture.root().to_str().unwrap(),
+        ],
         &tmp.path().join("deard.log"),
     );
     let seen = probe.take(7, WAIT);

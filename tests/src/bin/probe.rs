@@ -1,5 +1,6 @@
 //! `dear-probe`: a minimal client process for the end-to-end tests. Subscribes, prints `ready`,
-//! then one line per received frame: `frame <id> <skipped> <dropped> <sha256 of the payload>`.
+//! then one line per received frame:
+//! `frame <id> <skipped> <dropped> <sha256 of the payload> <flags, hex> <bundle name or ->`.
 //! Exits 0 after `--count` frames, 3 if `--timeout-s` passes first.
 
 use std::io::Write;
@@ -45,8 +46,16 @@ fn main() {
                 let hash = dear_e2e_tests::sha256_hex(frame.payload());
                 writeln!(
                     out,
-                    "frame {} {} {} {hash}",
-                    h.frame_id, h.frames_skipped, h.frames_dropped
+                    "frame {} {} {} {hash} {:x} {}",
+                    h.frame_id,
+                    h.frames_skipped,
+                    h.frames_dropped,
+                    h.flags,
+                    if h.bundle_name().is_empty() {
+                        "-"
+                    } else {
+                        h.bundle_name()
+                    }
                 )
                 .unwrap();
                 out.flush().unwrap();
