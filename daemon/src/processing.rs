@@ -58,12 +58,12 @@ pub struct Processor {
 
 impl Processor {
     /// The static engine for `width`×`height` frames aligned with `calibration`, refined with
-    /// the classical filter (`refine = Classical`) or not at all.
-    pub fn new_static(
+    /// the classical filter or not at all.
+    fn new_static(
         width: u32,
         height: u32,
         calibration: Calibration,
-        refine: RefineMode,
+        classical_filter: bool,
     ) -> Self {
         let (w, h) = (width as usize, height as usize);
         Processor {
@@ -73,10 +73,7 @@ impl Processor {
             engine: Engine::Static {
                 aligner: StaticAligner::new(h, w),
                 aligned: Array2::zeros((h, w)),
-                refiner: match refine {
-                    RefineMode::Classical | RefineMode::Dear => Some(ClassicalRefiner::default()),
-                    RefineMode::None => None,
-                },
+                refiner: classical_filter.then(ClassicalRefiner::default),
             },
         }
     }
@@ -89,8 +86,10 @@ impl Processor {
         calibration: Calibration,
         config: &PipelineConfig,
     ) -> Result<Self, String> {
-        if config.refine != RefineMode::Dear {
-            return Ok(Self::new_static(width, height, calibration, config.refine));
+        match config.refine {
+            RefineMode::Classical => return Ok(Self::new_static(width, height, calibration, true)),
+            RefineMode::None => return Ok(Self::new_static(width, height, calibration, false)),
+            RefineMode::Dear => {}
         }
         let dir = &config.bundle;
         let bundle = ModelBundle::load(dir).map_err(|e| {
