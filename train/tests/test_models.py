@@ -43,6 +43,7 @@ def test_flow_net_handles_sizes_not_multiple_of_64() -> None:
 def test_flow_outputs_are_linear_so_negative_flow_passes() -> None:
     """No activation on flow heads (the reference code's LeakyReLU squashed negative flow)."""
     net = build_flow("edge")
+    net.prior = None  # the edge tier's matching prior is tested in test_matching.py
     head = net.predict_flow2
     torch.nn.init.zeros_(head.weight)
     head.bias.data[:] = torch.tensor([-0.5, -1.0])

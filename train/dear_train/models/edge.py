@@ -4,9 +4,14 @@ Same architectures and I/O as the paper tier, so the daemon runs either bundle u
 
 - every convolution after the first of a stage is depthwise-separable;
 - channel widths are scaled down (flow ×1/4, fusion ×1/4, refinement 16/32/32/64);
-- the flow net stops at 1/32 and searches ±8 px at 1/8 resolution with stride 2 (81 cost-volume
+- the flow net stops at 1/32 and searches ±4 px at 1/8 resolution with stride 1 (81 cost-volume
   channels instead of 441): the misalignment the daemon corrects is 5–20 px at full resolution,
-  i.e. ≤ 2.5 px at 1/8, so ±8 (±64 px full-res) is ample;
+  i.e. ≤ 2.5 px at 1/8, so ±4 (±32 px full-res) covers it. (A first version searched ±8 with
+  stride 2 like the paper's ±20/2: its displacements were 16 full-res px apart, coarser than
+  the whole misalignment, and it never learned; see ``models/edge/README.md``.)
+- the flow net adds a parameter-free edge-matching prior (:mod:`.matching`) to its outputs and
+  learns a correction to it: RGB and IR texture differ, and from scratch on a CPU budget the
+  net did not learn to match them;
 - the refinement backbone runs at 1/2 resolution and its kernels are upsampled and applied to
   the full-resolution depth, which keeps the edge-preserving filtering at full resolution.
 
@@ -19,7 +24,9 @@ from dear_train.models.flownetc import FlowNetC, FlowNetCConfig
 from dear_train.models.fusion import FusionConfig, FusionNet
 from dear_train.models.kpn import RefineNet, UNetConfig
 
-EDGE_FLOW = FlowNetCConfig(width=0.25, max_displacement=8, stride=2, separable=True, levels=5)
+EDGE_FLOW = FlowNetCConfig(
+    width=0.25, max_displacement=4, stride=1, separable=True, levels=5, matching_prior=True
+)
 EDGE_FUSION = FusionConfig(width=0.25, separable=True)
 EDGE_REFINE = UNetConfig(widths=(16, 32, 32, 64), separable=True, backbone_stride=2)
 

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
+from dear_train.models.matching import EdgeMatchingPrior
 from dear_train.models.layers import (
     Correlation,
     conv,
@@ -43,6 +44,9 @@ class FlowNetCConfig:
     #: The network predicts ``flow / flow_scale`` internally (FlowNet's ``div_flow``), keeping
     #: its activations O(1) for flows of tens of pixels; outputs are multiplied back.
     flow_scale: float = 20.0
+    #: Add the parameter-free edge-matching prior (:mod:`.matching`) to every output, so the
+    #: learned layers predict a correction to it (edge tier).
+    matching_prior: bool = False
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -100,6 +104,7 @@ class FlowNetC(nn.Module):
         self.up3to2 = upsample_flow()
         cat2 = c(128) + c(64) + 2
         self.predict_flow2 = predict_flow(cat2)
+        self.prior = EdgeMatchingPrior() if cfg.matching_prior else None
         self._init_weights()
 
     def _init_weights(self) -> None:
@@ -124,6 +129,12 @@ class FlowNetC(nn.Module):
         up_feat = crop_like(deconv_layer(feat), skip)
         up_flow = crop_like(up_layer(flow), skip)
         return torch.cat([skip, up_feat, up_flow], dim=1)
+
+    def _prior_at(self, prior: torch.Tensor, out: torch.Tensor, rgb: torch.Tensor) -> torch.Tensor:
+        """The prior flow resampled to the grid of ``out`` (a 1/2^k-resolution output)."""
+        assert self.prior is not None
+        level = round(rgb.shape[-1] / out.shape[-1])  # 2^k: outputs are ceil(W / 2^k) wide
+        return resize_like(prior, out, self.prior.scale // level)
 
     def forward(self, rgb: torch.Tensor, amplitude: torch.Tensor) -> list[torch.Tensor]:
         cfg = self.config
@@ -154,4 +165,8 @@ class FlowNetC(nn.Module):
         flow2 = self.predict_flow2(cat2)
         flows += [flow5, flow4, flow3, flow2]
         full = resize_like(flow2, rgb, 4)
-        return [f * cfg.flow_scale for f in [*flows, full]]
+        outs = [f * cfg.flow_scale for f in [*flows, full]]
+        if self.prior is not None:
+            prior = self.prior(rgb, amplitude)
+            outs = [o + self._prior_at(prior, o, rgb) for o in outs]
+        return outs
