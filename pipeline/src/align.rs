@@ -2,25 +2,25 @@
 //! or the daemon's current online estimate).
 //!
 //! The flow `W(p) = t / D_rgb(p) + c` needs the depth in the RGB view, which is what we are
-//! computing. We solve it by fixed-point iteration: start from `D_rgb ≈ D_tof`, build the flow,
-//! warp, and repeat. Because `t/z` varies slowly with `z`, two iterations bring the error far
-//! below a pixel except right at depth edges, where the flow is ambiguous anyway.
+//! computing. Rather than iterate a backward warp towards it — a fixed point that jumps between
+//! foreground and background wherever `t/z` of a near object exceeds the object's distance to
+//! its edge (measured on `dear-synth perturb --sigma 2` at 320×240: 37–55 cm MAE on some
+//! frames against 12–20 cm for this method) — every ToF pixel `q` at depth `z` is splatted
+//! forward to `q − W(z)` with a z-buffer ([`splat_depth_into`]), the same rule the simulator
+//! and the training augmentation use to make the misaligned views. Pixels no surface reaches
+//! (disocclusions, the border the view moved away from) stay invalid (0).
 
-use ndarray::{Array2, ArrayView2, ArrayViewMut2, Zip};
+use ndarray::{ArrayView2, ArrayViewMut2, Zip};
 
 use crate::calibration::Calibration;
 use crate::frame::Flow;
-use crate::geometry::{flow_from_depth_into, warp_depth};
+use crate::geometry::{flow_from_depth_into, splat_depth_into};
 
-/// Fixed-point iterations of [`StaticAligner::align_into`].
-pub const ALIGN_ITERATIONS: usize = 2;
-
-/// Aligns depth with a given calibration; holds scratch buffers so the per-frame path does not
-/// allocate.
+/// Aligns depth with a given calibration; keeps the flow of the last frame for warping other
+/// ToF images (amplitude) the same way.
 #[derive(Debug, Clone)]
 pub struct StaticAligner {
     flow: Flow,
-    estimate: Array2<f32>,
 }
 
 impl StaticAligner {
@@ -28,13 +28,13 @@ impl StaticAligner {
     pub fn new(height: usize, width: usize) -> Self {
         StaticAligner {
             flow: Flow::zeros(height, width),
-            estimate: Array2::zeros((height, width)),
         }
     }
 
-    /// Warps `tof_depth` onto the RGB grid: `out(p) = D_tof(p + W(p))`, `W` from `calib` and the
-    /// aligned depth itself. Invalid pixels of the current estimate use the median valid depth
-    /// for their flow, so holes do not stop their neighbourhood from moving.
+    /// Aligns `tof_depth` to the RGB grid through `calib` (see the module docs) into `out`,
+    /// 0 where no surface lands, and sets [`flow`](Self::flow) to the RGB→ToF flow of the
+    /// result: `W(out(p))`, and at invalid pixels the flow of the median valid depth, so
+    /// warping another ToF image with it stays defined everywhere.
     ///
     /// # Panics
     /// If the shapes differ from the aligner's.
@@ -46,32 +46,28 @@ impl StaticAligner {
     ) {
         assert_eq!(
             tof_depth.dim(),
-            self.estimate.dim(),
+            self.flow.u.dim(),
             "align_into: depth shape differs from the aligner's"
         );
-        self.estimate.assign(&tof_depth);
-        for _ in 0..ALIGN_ITERATIONS {
-            let fallback = median_valid_depth(self.estimate.view()).unwrap_or(1.0);
-            flow_from_depth_into(
-                self.estimate.view(),
-                calib,
-                self.flow.u.view_mut(),
-                self.flow.v.view_mut(),
-                None,
-            );
-            if let Some((fu, fv)) = calib.flow_at(fallback) {
-                Zip::from(&self.estimate)
-                    .and(&mut self.flow.u)
-                    .and(&mut self.flow.v)
-                    .for_each(|&z, u, v| {
-                        if !(z > 0.0 && z.is_finite()) {
-                            *u = fu;
-                            *v = fv;
-                        }
-                    });
-            }
-            warp_depth(tof_depth, &self.flow, out.view_mut());
-            self.estimate.assign(&out);
+        splat_depth_into(tof_depth, calib, out.view_mut());
+        flow_from_depth_into(
+            out.view(),
+            calib,
+            self.flow.u.view_mut(),
+            self.flow.v.view_mut(),
+            None,
+        );
+        let fallback = median_valid_depth(tof_depth).unwrap_or(1.0);
+        if let Some((fu, fv)) = calib.flow_at(fallback) {
+            Zip::from(&out)
+                .and(&mut self.flow.u)
+                .and(&mut self.flow.v)
+                .for_each(|&z, u, v| {
+                    if !(z > 0.0 && z.is_finite()) {
+                        *u = fu;
+                        *v = fv;
+                    }
+                });
         }
     }
 
@@ -102,6 +98,7 @@ fn median_valid_depth(depth: ArrayView2<f32>) -> Option<f32> {
 mod tests {
     use super::*;
     use crate::geometry::warp_depth;
+    use ndarray::Array2;
 
     /// A slanted plane seen through a known calibration: aligning the "ToF" depth recovers the
     /// RGB-view depth everywhere the flow stays inside the image.
@@ -133,11 +130,13 @@ mod tests {
         let mut aligner = StaticAligner::new(h, w);
         let mut out = Array2::zeros((h, w));
         aligner.align_into(tof_depth.view(), &calib, out.view_mut());
+        // Bilinear splatting reproduces a linear image exactly under a uniform shift; here the
+        // shift varies with depth by up to 0.06 px per pixel, which leaves < 1 mm.
         let mut checked = 0;
         for r in 4..h - 4 {
             for c in 4..w - 12 {
                 assert!(
-                    (out[[r, c]] - rgb_depth[[r, c]]).abs() < 2e-4,
+                    (out[[r, c]] - rgb_depth[[r, c]]).abs() < 1e-3,
                     "({r},{c}) {} vs {}",
                     out[[r, c]],
                     rgb_depth[[r, c]]
@@ -150,5 +149,51 @@ mod tests {
         let mut naive = Array2::zeros((h, w));
         warp_depth(tof_depth.view(), &Flow::zeros(h, w), naive.view_mut());
         assert!((naive[[20, 20]] - rgb_depth[[20, 20]]).abs() > 0.03);
+    }
+
+    /// A near box in front of a wall under a large baseline term: the flow of the box (t/z =
+    /// 15 px) exceeds its distance to the wall's pixels, where a backward fixed point jumps
+    /// between surfaces. The aligned depth must match the true RGB view wherever that sees a
+    /// surface.
+    #[test]
+    fn near_objects_with_a_large_baseline_land_on_the_right_surface() {
+        let (h, w) = (60, 80);
+        let calib = Calibration {
+            tx: 6.0,
+            ty: 1.0,
+            cx: 2.0,
+            cy: -1.0,
+        };
+        let tof_depth = Array2::from_shape_fn((h, w), |(r, c)| {
+            if (20..40).contains(&r) && (30..50).contains(&c) {
+                0.4
+            } else {
+                3.0
+            }
+        });
+        let truth = crate::geometry::synthesize_view(
+            ndarray::Array3::<u8>::zeros((h, w, 1)).view(),
+            tof_depth.view(),
+            &calib,
+        );
+        let mut aligner = StaticAligner::new(h, w);
+        let mut out = Array2::zeros((h, w));
+        aligner.align_into(tof_depth.view(), &calib, out.view_mut());
+        let mut truth_valid = 0;
+        for ((p, &z), &valid) in out.indexed_iter().zip(&truth.valid) {
+            if valid {
+                truth_valid += 1;
+                assert!((z - truth.depth[p]).abs() < 1e-4, "{p:?}: {z} vs {}", truth.depth[p]);
+                let (u, v) = calib.flow_at(z).unwrap();
+                assert!((aligner.flow().u[p] - u).abs() < 1e-5);
+                assert!((aligner.flow().v[p] - v).abs() < 1e-5);
+            }
+        }
+        assert!(truth_valid > h * w / 2);
+        // The box moves by 17 px to the left, the wall by 4: the box's old place is wall the
+        // ToF camera never saw (a disocclusion, invalid), and beyond it the wall again.
+        assert!((out[[30, 20]] - 0.4).abs() < 1e-4);
+        assert_eq!(out[[30, 40]], 0.0);
+        assert!((out[[30, 60]] - 3.0).abs() < 1e-4);
     }
 }

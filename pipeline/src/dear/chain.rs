@@ -4,7 +4,7 @@
 //!
 //! `Full` mode is the paper: every frame runs the rough-flow network and re-solves the
 //! calibration. `Cached(calibration)` is the on-device shortcut between network runs: the flow
-//! is built from a known calibration and the depth itself ([`StaticAligner`]'s fixed point),
+//! is built from a known calibration and the depth itself ([`StaticAligner`]'s forward splat),
 //! and — by default, see [`CachedFusion`] — the fusion network is skipped too.
 
 use std::time::{Duration, Instant};
@@ -102,7 +102,7 @@ pub struct StageTimings {
     pub preprocess: Duration,
     /// Rough-flow network (zero in `Cached` mode).
     pub flow: Duration,
-    /// `D_rgb`, least squares and `W_convt` (`Full`), or the fixed-point alignment (`Cached`).
+    /// `D_rgb`, least squares and `W_convt` (`Full`), or the splatted alignment (`Cached`).
     pub calibrate: Duration,
     /// Fusion network (zero when skipped).
     pub fuse: Duration,
@@ -328,8 +328,8 @@ impl DearChain {
             }
             ChainMode::Cached(c) => {
                 calibration = Some(c);
-                // W_convt from the calibration and the aligned depth (fixed point); its warp of
-                // D_tof is D_rgb.
+                // D_rgb: D_tof splatted into the RGB view through the calibration; W_convt is
+                // that calibration's flow at D_rgb.
                 self.aligner
                     .align_into(input.depth, &c, self.depth_rgb.view_mut());
                 self.flow_convt.u.assign(&self.aligner.flow().u);

@@ -22,7 +22,7 @@
 //! shift accurately. The returned flow is recomputed from the output depth, so at valid pixels
 //! it is exactly `P.flow_at(depth)`.
 
-use ndarray::{Array2, Array3, ArrayView2, ArrayView3, Zip};
+use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayViewMut2, Zip};
 
 use crate::calibration::Calibration;
 use crate::frame::Flow;
@@ -77,24 +77,22 @@ fn splat_taps(tx: f32, ty: f32, h: usize, w: usize) -> impl Iterator<Item = ((us
     })
 }
 
-/// Forward-warp an aligned `(rgb, depth)` sample on the ToF grid into the RGB view that the
-/// perturbation `P` describes; see the module documentation for the method.
-///
-/// # Panics
-/// If `rgb` is not `(H, W, C)` over the depth's `(H, W)`.
-pub fn synthesize_view(
-    rgb: ArrayView3<u8>,
+/// Passes 1 and 2 of the module's method: the accumulated bilinear weight, weighted depth
+/// and (when `rgb` is given) weighted colour of the front surface at every target pixel.
+struct FrontSurface {
+    weight: Array2<f32>,
+    /// Weight of every surface that landed, front or not.
+    any_weight: Array2<f32>,
+    depth_sum: Array2<f32>,
+    colour_sum: Option<Array3<f32>>,
+}
+
+fn splat_front(
     depth: ArrayView2<f32>,
     perturbation: &Calibration,
-) -> SynthesizedView {
+    rgb: Option<ArrayView3<u8>>,
+) -> FrontSurface {
     let (h, w) = depth.dim();
-    let (rh, rw, c) = rgb.dim();
-    assert_eq!(
-        (rh, rw),
-        (h, w),
-        "synthesize_view: rgb is {rh}×{rw} but depth is {h}×{w}"
-    );
-
     // Landing points of the valid sources, computed once.
     let landing = |y: usize, x: usize| -> Option<(f32, f32, f32)> {
         let z = depth[(y, x)];
@@ -120,24 +118,91 @@ pub fn synthesize_view(
     }
 
     // Pass 2: accumulate the front surface.
-    let mut wsum = Array2::<f32>::zeros((h, w));
-    let mut zsum = Array2::<f32>::zeros((h, w));
-    let mut csum = Array3::<f32>::zeros((h, w, c));
+    let mut front = FrontSurface {
+        weight: Array2::zeros((h, w)),
+        any_weight: Array2::zeros((h, w)),
+        depth_sum: Array2::zeros((h, w)),
+        colour_sum: rgb.map(|rgb| Array3::zeros((h, w, rgb.dim().2))),
+    };
     for y in 0..h {
         for x in 0..w {
             if let Some((tx, ty, z)) = landing(y, x) {
                 for (t, wt) in splat_taps(tx, ty, h, w) {
+                    front.any_weight[t] += wt;
                     if same_surface(zbuf[t], z) {
-                        wsum[t] += wt;
-                        zsum[t] += wt * z;
-                        for ch in 0..c {
-                            csum[(t.0, t.1, ch)] += wt * f32::from(rgb[(y, x, ch)]);
+                        front.weight[t] += wt;
+                        front.depth_sum[t] += wt * z;
+                        if let (Some(csum), Some(rgb)) = (&mut front.colour_sum, &rgb) {
+                            for ch in 0..rgb.dim().2 {
+                                csum[(t.0, t.1, ch)] += wt * f32::from(rgb[(y, x, ch)]);
+                            }
                         }
                     }
                 }
             }
         }
     }
+    front
+}
+
+/// The depth of `depth`'s surfaces as seen from the view `perturbation` describes: each pixel
+/// of `out` is the front surface's depth, or 0 where no surface lands (disocclusions, the
+/// border the view moved away from).
+///
+/// Unlike [`synthesize_view`], which makes ground truth from clean depth and drops pixels the
+/// front surface covers less than half, a pixel is kept when the surfaces landing on it
+/// together cover half of it: measured depth has noise, flying pixels and multi-path errors
+/// that split one surface into several by the 3 % rule, and dropping those pixels left a
+/// fifth of a `dear-synth` frame empty.
+///
+/// This is how a ToF depth map is aligned to the RGB grid with a *known* calibration: a
+/// backward warp would need the RGB-view depth to compute its own flow, and near objects with
+/// a large baseline term make any fixed-point iteration for it jump between surfaces.
+///
+/// # Panics
+/// If `out`'s shape differs from `depth`'s.
+pub fn splat_depth_into(
+    depth: ArrayView2<f32>,
+    perturbation: &Calibration,
+    mut out: ArrayViewMut2<f32>,
+) {
+    assert_eq!(out.dim(), depth.dim(), "splat_depth_into: shapes differ");
+    let front = splat_front(depth, perturbation, None);
+    Zip::from(&mut out)
+        .and(&front.weight)
+        .and(&front.any_weight)
+        .and(&front.depth_sum)
+        .for_each(|o, &ws, &any, &zs| {
+            let z = zs / ws.max(f32::MIN_POSITIVE);
+            *o = if ws > 0.0 && any >= SPLAT_MIN_COVERAGE && perturbation.flow_at(z).is_some() {
+                z
+            } else {
+                0.0
+            };
+        });
+}
+
+/// Forward-warp an aligned `(rgb, depth)` sample on the ToF grid into the RGB view that the
+/// perturbation `P` describes; see the module documentation for the method.
+///
+/// # Panics
+/// If `rgb` is not `(H, W, C)` over the depth's `(H, W)`.
+pub fn synthesize_view(
+    rgb: ArrayView3<u8>,
+    depth: ArrayView2<f32>,
+    perturbation: &Calibration,
+) -> SynthesizedView {
+    let (h, w) = depth.dim();
+    let (rh, rw, c) = rgb.dim();
+    assert_eq!(
+        (rh, rw),
+        (h, w),
+        "synthesize_view: rgb is {rh}×{rw} but depth is {h}×{w}"
+    );
+
+    let front = splat_front(depth, perturbation, Some(rgb));
+    let (wsum, zsum) = (&front.weight, &front.depth_sum);
+    let csum = front.colour_sum.expect("colour was splatted");
 
     // Pass 3: normalise and validate.
     let mut out = SynthesizedView {
@@ -146,7 +211,7 @@ pub fn synthesize_view(
         flow: Flow::zeros(h, w),
         valid: Array2::from_elem((h, w), false),
     };
-    Zip::indexed(&wsum).for_each(|(y, x), &ws| {
+    Zip::indexed(wsum).for_each(|(y, x), &ws| {
         if ws < SPLAT_MIN_COVERAGE {
             return;
         }
