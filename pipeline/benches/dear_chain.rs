@@ -1,10 +1,12 @@
-//! The DEAR chain at VGA (640 × 480) with the untrained edge-tier test bundle
-//! (`fixtures/bundles/smoke-edge`, the shipped graph structure): each network alone, and one
-//! frame in `Full` mode (the paper), `Cached` with fusion skipped (the default) and `Cached`
-//! with fusion run.
+//! The DEAR chain at VGA (640 × 480) with the shipped edge bundle (`models/edge`; set
+//! `DEAR_BENCH_BUNDLE` to time another): each network alone, and one frame in `Full` mode (the
+//! paper: the rough-flow network every frame), `Cached` with fusion skipped (the online
+//! steady state) and `Cached` with fusion run.
 //!
 //! `cargo bench -p dear-pipeline --bench dear_chain -- --warm-up-time 2 --measurement-time 10`
 //! With `--features multithread`, every case also runs with tract on 2 threads (`…/mt2`).
+//! The onnxruntime peer figure for the same files: `.venv/bin/dear-bench-onnx --bundle
+//! models/edge`.
 
 use std::hint::black_box;
 use std::path::Path;
@@ -58,10 +60,11 @@ fn frame() -> (Array3<u8>, Array2<f32>, Array2<f32>) {
 }
 
 fn bench(c: &mut Criterion) {
-    let bundle = ModelBundle::load(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/bundles/smoke-edge"),
-    )
-    .expect("the committed smoke bundle loads");
+    let path = std::env::var_os("DEAR_BENCH_BUNDLE")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/edge"));
+    let bundle =
+        ModelBundle::load(&path).unwrap_or_else(|e| panic!("bundle {}: {e}", path.display()));
     let (rgb, amp, depth) = frame();
     let calib = Calibration {
         tx: 6.0,

@@ -1,7 +1,9 @@
 //! The evaluation engine on a scene with known misalignment: the oracle calibration must beat
 //! the static one, and the numbers must match what the geometry implies.
 
-use dear_pipeline::evaluate::{ground_truth_mask, Evaluation, Method, MethodRunner};
+use dear_pipeline::evaluate::{
+    ground_truth_flow, ground_truth_mask, Evaluation, Method, MethodRunner,
+};
 use dear_pipeline::geometry::synthesize_view;
 use dear_pipeline::{Calibration, RgbdFrame};
 use ndarray::{Array2, Array3};
@@ -42,6 +44,7 @@ fn oracle_beats_static_and_static_aepe_is_the_true_flow() {
     };
     let frame = misaligned_frame(p);
     let valid = ground_truth_mask(&frame).unwrap();
+    let truth = ground_truth_flow(&frame);
     let mut runner = MethodRunner::new(96, 128, Calibration::IDENTITY);
     let mut eval = Evaluation::new();
     for method in [
@@ -50,7 +53,7 @@ fn oracle_beats_static_and_static_aepe_is_the_true_flow() {
         Method::OracleCalibration,
     ] {
         let out = runner.run(method, &frame).unwrap();
-        eval.add(method.name(), &frame, &out, valid.view());
+        eval.add(method.name(), &frame, &out, valid.view(), truth.as_ref());
     }
     let reports = eval.reports();
     let by = |name: &str| reports.iter().find(|r| r.method == name).unwrap().clone();
@@ -92,4 +95,27 @@ fn frames_without_ground_truth_are_rejected_by_name() {
     frame.gt_depth = None;
     let err = ground_truth_mask(&frame).unwrap_err().to_string();
     assert!(err.contains("000042.gt.png"), "{err}");
+}
+
+#[test]
+fn ground_truth_flow_comes_from_the_perturbation_when_no_flow_file_exists() {
+    let p = Calibration {
+        tx: 4.0,
+        ty: -2.0,
+        cx: 1.5,
+        cy: 0.5,
+    };
+    let mut frame = misaligned_frame(p);
+    frame.flow = None;
+    let flow = ground_truth_flow(&frame).unwrap();
+    let gt = frame.gt_depth.as_ref().unwrap();
+    for ((&z, &u), &v) in gt.iter().zip(flow.u.iter()).zip(flow.v.iter()) {
+        if z > 0.0 {
+            assert!((u - (4.0 / z + 1.5)).abs() < 1e-5 && (v - (-2.0 / z + 0.5)).abs() < 1e-5);
+        } else {
+            assert!(u.is_nan() && v.is_nan());
+        }
+    }
+    frame.perturbation = None;
+    assert!(ground_truth_flow(&frame).is_none());
 }

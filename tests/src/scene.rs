@@ -31,17 +31,20 @@ pub fn write_capture(
     CaptureDir::open(dir).expect("open test capture")
 }
 
+/// The noise-free depth of frame `i` at pixel `(r, c)`: the ground truth of [`frame`].
+pub fn true_depth(i: u64, w: usize, h: usize, r: usize, c: usize) -> f32 {
+    let box_left = (w as f32 * 0.2 + i as f32 * 2.0) as usize % (w / 2);
+    let in_box = (box_left..box_left + w / 4).contains(&c) && (h / 3..2 * h / 3).contains(&r);
+    if in_box {
+        0.9
+    } else {
+        2.5 + 0.004 * c as f32 - 0.002 * r as f32
+    }
+}
+
 /// Frame `i` of the scene.
 pub fn frame(i: u64, w: usize, h: usize) -> RgbdFrame {
-    let box_left = (w as f32 * 0.2 + i as f32 * 2.0) as usize % (w / 2);
-    let depth_at = |r: usize, c: usize| -> f32 {
-        let in_box = (box_left..box_left + w / 4).contains(&c) && (h / 3..2 * h / 3).contains(&r);
-        if in_box {
-            0.9
-        } else {
-            2.5 + 0.004 * c as f32 - 0.002 * r as f32
-        }
-    };
+    let depth_at = |r: usize, c: usize| true_depth(i, w, h, r, c);
     let depth = Array2::from_shape_fn((h, w), |(r, c)| {
         // A deterministic "noise" pattern and a few invalid pixels, as a real sensor has.
         let noise = (((r * 31 + c * 17 + i as usize * 7) % 13) as f32 - 6.0) * 0.002;

@@ -2,6 +2,7 @@
 //! [`stats`] is the pure per-second aggregation behind `watch`.
 
 pub mod dump;
+pub mod eval;
 pub mod list;
 pub mod stats;
 pub mod watch;
@@ -12,7 +13,8 @@ use std::sync::Arc;
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 
-/// Command-line client of deard: find frame services, watch live statistics, dump frames.
+/// Command-line client of deard: find frame services, watch live statistics, dump frames,
+/// evaluate the pipeline on captures with ground truth.
 #[derive(Debug, Parser)]
 #[command(name = "dear", version, about)]
 pub struct Cli {
@@ -20,7 +22,7 @@ pub struct Cli {
     pub command: Command,
 }
 
-/// Subcommands. `eval` and `record` are planned (see DESIGN.md) and will be added here.
+/// Subcommands. `record` is planned (see DESIGN.md) and will be added here.
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// List the DEAR frame services on this machine, with their publishers and subscribers.
@@ -37,6 +39,11 @@ pub enum Command {
     /// which is ground truth) and the daemon's own frame id and timestamps in
     /// `source.published_frames`.
     Dump(dump::DumpArgs),
+    /// Measure alignment and depth accuracy, and time per frame, on a capture with ground
+    /// truth: the ToF input, the classical baselines (--baselines) and model bundles
+    /// (--bundle), with the same pipeline code the daemon runs. Writes eval.json, eval.md and
+    /// figures to --out.
+    Eval(eval::EvalArgs),
 }
 
 /// Runs the parsed command.
@@ -45,6 +52,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::List => list::run(),
         Command::Watch(args) => watch::run(&args),
         Command::Dump(args) => dump::run(&args),
+        Command::Eval(args) => eval::run(&args),
     }
 }
 

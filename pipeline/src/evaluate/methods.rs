@@ -59,6 +59,8 @@ pub struct MethodOutput {
     pub depth: Array2<f32>,
     /// The RGB→ToF flow the method aligned with, when it has one.
     pub flow: Option<Flow>,
+    /// The network's rough flow `W_rough`, for methods that have one (DEAR bundles).
+    pub flow_rough: Option<Flow>,
     /// The calibration it used, when it has one.
     pub calibration: Option<Calibration>,
     /// Wall time of the method on this frame, seconds.
@@ -93,6 +95,7 @@ impl MethodRunner {
                 return Some(MethodOutput {
                     depth: frame.depth.clone(),
                     flow: None,
+                    flow_rough: None,
                     calibration: None,
                     seconds: start.elapsed().as_secs_f64(),
                 })
@@ -122,6 +125,7 @@ impl MethodRunner {
         Some(MethodOutput {
             depth,
             flow: Some(self.aligner.flow().clone()),
+            flow_rough: None,
             calibration: Some(calibration),
             seconds: start.elapsed().as_secs_f64(),
         })

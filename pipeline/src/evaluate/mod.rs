@@ -3,16 +3,20 @@
 //! [`Evaluation`] accumulates the paper's metrics per method, with the time each method took,
 //! so accuracy and cost come from one run.
 
+#[cfg(feature = "inference")]
+pub mod bundle;
 pub mod methods;
 pub mod report;
 
+#[cfg(feature = "inference")]
+pub use bundle::{BundleMethod, BundleOutputs};
 pub use methods::{Method, MethodOutput, MethodRunner};
 pub use report::{Evaluation, MethodReport};
 
 use ndarray::{Array2, Zip};
 
 use crate::capture::flo::UNKNOWN_FLOW;
-use crate::RgbdFrame;
+use crate::{Flow, RgbdFrame};
 
 /// Why a frame cannot be evaluated.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -46,4 +50,22 @@ pub fn ground_truth_mask(frame: &RgbdFrame) -> Result<Array2<bool>, EvalError> {
             });
     }
     Ok(valid)
+}
+
+/// The ground-truth RGB→ToF flow of a frame: its `.flo` file, else the flow its recorded
+/// perturbation predicts at the ground-truth depth (aligned captures record a zero
+/// perturbation and no flow file). `None` when neither is known.
+pub fn ground_truth_flow(frame: &RgbdFrame) -> Option<Flow> {
+    if let Some(flow) = &frame.flow {
+        return Some(flow.clone());
+    }
+    let (p, gt) = (frame.perturbation?, frame.gt_depth.as_ref()?);
+    let mut flow = Flow::zeros(gt.nrows(), gt.ncols());
+    Zip::from(&mut flow.u)
+        .and(&mut flow.v)
+        .and(gt)
+        .for_each(|u, v, &z| {
+            (*u, *v) = p.flow_at(z).unwrap_or((f32::NAN, f32::NAN));
+        });
+    Some(flow)
 }

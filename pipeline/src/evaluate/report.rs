@@ -4,7 +4,7 @@ use serde::Serialize;
 
 use super::methods::MethodOutput;
 use crate::metrics::{aepe, DepthErrorSplit, CLASSES, MAX_EVAL_DEPTH_M};
-use crate::RgbdFrame;
+use crate::{Flow, RgbdFrame};
 use ndarray::ArrayView2;
 
 /// Accumulated results of one method.
@@ -13,6 +13,8 @@ pub struct MethodAccumulator {
     split: DepthErrorSplit,
     aepe_sum: f64,
     aepe_frames: usize,
+    aepe_rough_sum: f64,
+    aepe_rough_frames: usize,
     seconds: Vec<f64>,
 }
 
@@ -29,6 +31,8 @@ pub struct MethodReport {
     pub coverage: f64,
     /// Mean over frames of the per-frame AEPE (px) of the method's flow, when it has one.
     pub aepe_px: Option<f64>,
+    /// The same for the rough (network) flow, for methods that have one.
+    pub aepe_rough_px: Option<f64>,
     /// Median seconds per frame.
     pub median_seconds: f64,
 }
@@ -44,13 +48,15 @@ impl Evaluation {
         Self::default()
     }
 
-    /// Adds `output` of method `name` on `frame`; `valid` is the ground-truth mask.
+    /// Adds `output` of method `name` on `frame`; `valid` is the ground-truth mask and
+    /// `truth` the ground-truth flow ([`super::ground_truth_flow`]), when known.
     pub fn add(
         &mut self,
         name: &str,
         frame: &RgbdFrame,
         output: &MethodOutput,
         valid: ArrayView2<bool>,
+        truth: Option<&Flow>,
     ) {
         let acc = match self.methods.iter().position(|(n, _)| n == name) {
             Some(i) => &mut self.methods[i].1,
@@ -73,10 +79,16 @@ impl Evaluation {
             gt_masked.view(),
             MAX_EVAL_DEPTH_M,
         );
-        if let (Some(flow), Some(truth)) = (&output.flow, &frame.flow) {
+        if let (Some(flow), Some(truth)) = (&output.flow, truth) {
             if let Some(e) = aepe(flow, truth, valid) {
                 acc.aepe_sum += e;
                 acc.aepe_frames += 1;
+            }
+        }
+        if let (Some(flow), Some(truth)) = (&output.flow_rough, truth) {
+            if let Some(e) = aepe(flow, truth, valid) {
+                acc.aepe_rough_sum += e;
+                acc.aepe_rough_frames += 1;
             }
         }
         acc.seconds.push(output.seconds);
@@ -96,6 +108,8 @@ impl Evaluation {
                     mae_all_cm: acc.split.mae_all_cm(),
                     coverage: acc.split.coverage(),
                     aepe_px: (acc.aepe_frames > 0).then(|| acc.aepe_sum / acc.aepe_frames as f64),
+                    aepe_rough_px: (acc.aepe_rough_frames > 0)
+                        .then(|| acc.aepe_rough_sum / acc.aepe_rough_frames as f64),
                     median_seconds: seconds.get(seconds.len() / 2).copied().unwrap_or(f64::NAN),
                 }
             })
@@ -104,18 +118,19 @@ impl Evaluation {
 
     /// A Markdown table of the reports (paper Tables 1–3 in one: AEPE, split MAE, time).
     pub fn markdown(&self) -> String {
-        let mut out = String::from("| Method | AEPE (px) |");
+        let mut out = String::from("| Method | AEPE rough (px) | AEPE (px) |");
         for c in CLASSES.iter().take(3) {
             out.push_str(&format!(" MAE {c} (cm) |"));
         }
         out.push_str(
-            " MAE all (cm) | Coverage | ms / frame |\n|---|---:|---:|---:|---:|---:|---:|---:|\n",
+            " MAE all (cm) | Coverage | ms / frame |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         );
         let fmt = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.2}"));
         for r in self.reports() {
             out.push_str(&format!(
-                "| {} | {} | {} | {} | {} | {} | {:.1} % | {:.1} |\n",
+                "| {} | {} | {} | {} | {} | {} | {} | {:.1} % | {:.1} |\n",
                 r.method,
+                fmt(r.aepe_rough_px),
                 fmt(r.aepe_px),
                 fmt(r.mae_cm[0]),
                 fmt(r.mae_cm[1]),

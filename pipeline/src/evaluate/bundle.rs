@@ -1,0 +1,159 @@
+//! A model bundle as rows of an evaluation (feature `inference`), run through the same
+//! [`DearChain`] the daemon runs.
+//!
+//! One run of the paper's chain on a frame yields two rows: the depth aligned with the refined
+//! flow before refinement ("aligned"), and the chain's output ("refined"), so alignment and
+//! refinement are measured separately without running the networks twice. A third row runs the
+//! refinement alone on depth aligned with the frame's *true* calibration: the protocol of the
+//! paper's Tables 2 and 3, which evaluate refinement on already-aligned input. A fourth,
+//! [`BundleMethod::run_online`], is the daemon's online recalibration over frames in order.
+
+use ndarray::Array2;
+
+use super::methods::MethodOutput;
+use crate::dear::{ChainError, ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
+use crate::model::{BundleError, ModelBundle};
+use crate::online::OnlineCalibrator;
+use crate::RgbdFrame;
+
+/// The outputs of one chain run.
+#[derive(Debug, Clone)]
+pub struct BundleOutputs {
+    /// Depth warped with the refined flow, before the refinement network.
+    pub aligned: MethodOutput,
+    /// The chain's output (aligned and refined).
+    pub refined: MethodOutput,
+    /// What the chain reported (calibration fit, stage timings).
+    pub report: ChainReport,
+}
+
+/// A bundle's chain for one frame size, with output buffers kept between frames.
+#[derive(Debug)]
+pub struct BundleMethod {
+    name: String,
+    chain: DearChain,
+    depth: Array2<f32>,
+    confidence: Array2<u8>,
+}
+
+impl BundleMethod {
+    /// The chain of `bundle` for `(height, width)` frames; `name` labels its rows.
+    ///
+    /// # Errors
+    /// As [`DearChain::new`].
+    pub fn new(
+        bundle: &ModelBundle,
+        name: impl Into<String>,
+        height: usize,
+        width: usize,
+    ) -> Result<Self, BundleError> {
+        Ok(BundleMethod {
+            name: name.into(),
+            chain: DearChain::new(bundle, width, height)?,
+            depth: Array2::zeros((height, width)),
+            confidence: Array2::zeros((height, width)),
+        })
+    }
+
+    /// The label of this bundle's rows.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn process(&mut self, frame: &RgbdFrame, mode: ChainMode) -> Result<ChainReport, ChainError> {
+        self.chain.process(
+            ChainInput {
+                rgb: frame.rgb.view(),
+                amplitude: frame.amplitude.view(),
+                depth: frame.depth.view(),
+            },
+            mode,
+            ChainOutput {
+                depth: self.depth.view_mut(),
+                confidence: self.confidence.view_mut(),
+            },
+        )
+    }
+
+    /// The paper's chain (rough flow and calibration solved on this frame).
+    ///
+    /// # Errors
+    /// As [`DearChain::process`].
+    pub fn run(&mut self, frame: &RgbdFrame) -> Result<BundleOutputs, ChainError> {
+        let report = self.process(frame, ChainMode::Full)?;
+        let t = report.timings;
+        let flow = Some(self.chain.flow_refined().clone());
+        let flow_rough = Some(self.chain.flow_rough().clone());
+        let aligned = MethodOutput {
+            depth: self.chain.depth_warped().clone(),
+            flow: flow.clone(),
+            flow_rough: flow_rough.clone(),
+            calibration: report.calibration,
+            seconds: (t.preprocess + t.flow + t.calibrate + t.fuse + t.warp).as_secs_f64(),
+        };
+        let refined = MethodOutput {
+            depth: self.depth.clone(),
+            flow,
+            flow_rough,
+            calibration: report.calibration,
+            seconds: (t.total() - t.residual).as_secs_f64(),
+        };
+        Ok(BundleOutputs {
+            aligned,
+            refined,
+            report,
+        })
+    }
+
+    /// The refinement network alone, on depth aligned with the frame's true calibration.
+    /// `None` when the capture does not record the frame's perturbation.
+    ///
+    /// # Errors
+    /// As [`DearChain::process`].
+    pub fn run_refine_only(
+        &mut self,
+        frame: &RgbdFrame,
+    ) -> Option<Result<MethodOutput, ChainError>> {
+        let truth = frame.perturbation?;
+        Some(self.process(frame, ChainMode::Cached(truth)).map(|report| {
+            let t = report.timings;
+            MethodOutput {
+                depth: self.depth.clone(),
+                flow: None,
+                flow_rough: None,
+                calibration: Some(truth),
+                seconds: (t.total() - t.residual).as_secs_f64(),
+            }
+        }))
+    }
+
+    /// The daemon's online mode on the next frame of a sequence: `online` decides whether the
+    /// rough-flow network runs (`Full`) or its filtered estimate aligns the frame (`Cached`),
+    /// exactly as `deard` does. Frames must come in capture order. The output's flow is the
+    /// one the frame was aligned with; its calibration the published estimate. The time
+    /// includes the alignment residual, which the online trigger needs.
+    ///
+    /// # Errors
+    /// As [`DearChain::process`].
+    pub fn run_online(
+        &mut self,
+        frame: &RgbdFrame,
+        online: &mut OnlineCalibrator,
+    ) -> Result<(MethodOutput, ChainReport), ChainError> {
+        let decision = online.begin_frame();
+        let mode = match (decision.run_network, decision.calibration) {
+            (None, Some(estimate)) => ChainMode::Cached(estimate),
+            _ => ChainMode::Full,
+        };
+        let report = self.process(frame, mode)?;
+        online.end_frame(report.measurement.clone(), report.alignment_residual);
+        let output = MethodOutput {
+            depth: self.depth.clone(),
+            flow: Some(self.chain.flow_refined().clone()),
+            flow_rough: None,
+            calibration: online.estimate().or(report.calibration),
+            seconds: report.timings.total().as_secs_f64(),
+        };
+        Ok((output, report))
+    }
+}

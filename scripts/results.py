@@ -1,0 +1,374 @@
+"""Assembles RESULTS.md from the `dear eval` outputs written by scripts/results.sh.
+
+Reads OUT/<set>/eval.json for the sets aligned, sigma2, sigma4, sigma6; lays the numbers out
+in the shape of the paper's tables; computes the relative improvements the paper reports and
+sets ours beside them; copies the figures. Every number in RESULTS.md comes from eval.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+SIGMAS = (2, 4, 6)
+
+# The paper's relative improvements (Qiu et al., ICCV 2019).
+PAPER_AEPE_CHANGE = -0.12  # Table 1: refined flow vs rough flow
+PAPER_KPN_VS_UNET = -0.16  # Table 2: ToF-KPN vs U-Net, MAE all
+PAPER_WHOLE = (
+    14.61,
+    2.90,
+    2.81,
+)  # input, whole pipeline, refinement at true alignment (cm)
+
+Report = dict[str, Any]
+
+
+def load(eval_dir: Path, name: str) -> dict[str, Report]:
+    path = eval_dir / name / "eval.json"
+    data = json.loads(path.read_text())
+    return {m["method"]: m for m in data["methods"]} | {"__file__": data}
+
+
+def fmt(v: float | None, digits: int = 2) -> str:
+    return "–" if v is None else f"{v:.{digits}f}"
+
+
+def pct(new: float | None, old: float | None) -> str:
+    if new is None or old is None or old == 0:
+        return "–"
+    return f"{100.0 * (new - old) / old:+.0f} %"
+
+
+def bundles(report: dict[str, Report]) -> list[str]:
+    """Bundle names: rows that have an '<name> aligned' companion."""
+    return [m[: -len(" aligned")] for m in report if m.endswith(" aligned")]
+
+
+def table_alignment(sets: dict[int, dict[str, Report]]) -> list[str]:
+    lines = [
+        "| Method | " + " | ".join(f"σ = {s} px" for s in SIGMAS) + " |",
+        "|---|" + "---:|" * len(SIGMAS),
+    ]
+
+    def row(label: str, method: str, key: str) -> None:
+        cells = [fmt(sets[s].get(method, {}).get(key)) for s in SIGMAS]
+        if any(c != "–" for c in cells):
+            lines.append(f"| {label} | " + " | ".join(cells) + " |")
+
+    row("static calibration (factory)", "static-calibration", "aepe_px")
+    row("classical edge matching + LS", "edge-matching", "aepe_px")
+    for b in bundles(sets[SIGMAS[0]]):
+        row(f"{b}: rough flow W_rough", b, "aepe_rough_px")
+        row(f"{b}: refined flow W_refn", b, "aepe_px")
+    row("true calibration (bound)", "oracle-calibration", "aepe_px")
+    return lines
+
+
+def table_refinement(aligned: dict[str, Report]) -> list[str]:
+    lines = [
+        "| Method | MAE low (cm) | MAE mid (cm) | MAE high (cm) | MAE all (cm) | ms / frame |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
+    rows = [
+        ("ToF input", "raw-tof"),
+        ("classical edge-aware filter", "static+classical-filter"),
+    ]
+    rows += [
+        (f"{b} (ToF-KPN, edge tier)", f"{b} refine @ true calibration")
+        for b in bundles(aligned)
+    ]
+    for label, method in rows:
+        r = aligned.get(method)
+        if r is None:
+            continue
+        cells = [fmt(v) for v in r["mae_cm"][:3]] + [fmt(r["mae_all_cm"])]
+        lines.append(
+            f"| {label} | "
+            + " | ".join(cells)
+            + f" | {1e3 * r['median_seconds']:.1f} |"
+        )
+    return lines
+
+
+def table_whole(report: dict[str, Report]) -> list[str]:
+    lines = [
+        "| Method | AEPE (px) | MAE all (cm) | vs input | ms / frame |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    raw = report["raw-tof"]["mae_all_cm"]
+    rows = [
+        ("ToF input, unaligned", "raw-tof"),
+        ("static calibration", "static-calibration"),
+        ("static calibration + classical filter", "static+classical-filter"),
+        ("edge matching + LS + classical filter", "edge-matching+classical-filter"),
+    ]
+    for b in bundles(report):
+        rows += [
+            (f"{b}: aligned (before ToF-KPN)", f"{b} aligned"),
+            (f"{b}: whole pipeline", b),
+            (f"{b}: ToF-KPN at the true calibration", f"{b} refine @ true calibration"),
+        ]
+    for label, method in rows:
+        r = report.get(method)
+        if r is None:
+            continue
+        lines.append(
+            f"| {label} | {fmt(r.get('aepe_px'))} | {fmt(r['mae_all_cm'])} | "
+            f"{pct(r['mae_all_cm'], raw)} | {1e3 * r['median_seconds']:.1f} |"
+        )
+    return lines
+
+
+def table_tracking(report: dict[str, Report]) -> list[str]:
+    lines = [
+        "| Calibration | AEPE (px) | MAE all (cm) | flow network on | ms / frame |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    frames = report["__file__"]["frames_evaluated"]
+    network = dict(report["__file__"].get("online_network_frames", []))
+    rows = [
+        ("(c) static (factory) calibration", "static-calibration", "–"),
+        ("classical edge matching + LS, every frame", "edge-matching", "–"),
+    ]
+    for b in bundles(report):
+        rows += [
+            (f"(a) `{b}`: per-frame estimation (the paper)", b, f"{frames} / {frames}"),
+            (
+                f"(b) `{b}`: online filter",
+                f"{b} online",
+                f"{network.get(b, '?')} / {frames}",
+            ),
+        ]
+    for label, method, runs in rows:
+        r = report.get(method)
+        if r is None:
+            continue
+        lines.append(
+            f"| {label} | {fmt(r.get('aepe_px'))} | {fmt(r['mae_all_cm'])} | {runs} | "
+            f"{1e3 * r['median_seconds']:.1f} |"
+        )
+    return lines
+
+
+def criterion_seconds(root: Path, name: str) -> tuple[float, float] | None:
+    """Median and p95 seconds per iteration of a criterion benchmark, from its samples."""
+    path = root / name / "new" / "sample.json"
+    if not path.is_file():
+        return None
+    sample = json.loads(path.read_text())
+    per_iter = sorted(t / n * 1e-9 for t, n in zip(sample["times"], sample["iters"]))
+    return per_iter[len(per_iter) // 2], per_iter[
+        min(len(per_iter) - 1, round(0.95 * len(per_iter)))
+    ]
+
+
+def table_latency(criterion: Path, onnxruntime: Path, interval: int) -> list[str]:
+    lines = [
+        (
+            "| What | tract median (ms) | tract p95 (ms) | onnxruntime 1 thread (ms) | "
+            "onnxruntime 2 threads (ms) |"
+        ),
+        "|---|---:|---:|---:|---:|",
+    ]
+    ort: dict[tuple[str, int], float] = {}
+    if onnxruntime.is_file():
+        for r in json.loads(onnxruntime.read_text())["runs"]:
+            ort[(r["graph"], r["threads"])] = r["median_s"]
+    rows = [
+        ("rough-flow network", "flow_net", "flow"),
+        ("fusion network", "fuse_net", "fuse"),
+        ("refinement network (ToF-KPN)", "refine_net", "refine"),
+        ("frame, rough flow every frame (the paper)", "frame_full", None),
+        ("frame, online steady state (cached calibration)", "frame_cached_skip", None),
+    ]
+    times = {}
+    for label, bench, graph in rows:
+        t = criterion_seconds(criterion, bench)
+        if t is None:
+            continue
+        times[bench] = t
+        o1, o2 = (ort.get((graph, k)) if graph else None for k in (1, 2))
+        cells = [f"{1e3 * t[0]:.1f}", f"{1e3 * t[1]:.1f}"]
+        cells += ["–" if o is None else f"{1e3 * o:.1f}" for o in (o1, o2)]
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    if "frame_full" in times and "frame_cached_skip" in times:
+        full, cached = times["frame_full"][0], times["frame_cached_skip"][0]
+        mean = ((interval - 1) * cached + full) / interval
+        lines.append(
+            f"| frame, online with the network every {interval} frames (mean) | "
+            f"{1e3 * mean:.1f} | – | – | – |"
+        )
+    return lines
+
+
+def alignment_paragraph(sets: dict[int, dict[str, Report]]) -> str:
+    parts = []
+    for b in bundles(sets[SIGMAS[0]]):
+        changes = []
+        for s in SIGMAS:
+            r = sets[s].get(b, {})
+            changes.append(
+                f"{pct(r.get('aepe_px'), r.get('aepe_rough_px'))} at σ = {s}"
+            )
+        parts.append(f"`{b}`: refined vs rough flow AEPE " + ", ".join(changes))
+    return (
+        f"The paper's flow fusion lowers the AEPE of the rough flow by about "
+        f"{-100 * PAPER_AEPE_CHANGE:.0f} % (Table 1). Ours: " + "; ".join(parts) + "."
+    )
+
+
+def refinement_paragraph(aligned: dict[str, Report]) -> str:
+    raw = aligned["raw-tof"]["mae_all_cm"]
+    classical = aligned.get("static+classical-filter", {}).get("mae_all_cm")
+    parts = [f"the classical filter {pct(classical, raw)}"]
+    for b in bundles(aligned):
+        r = aligned.get(f"{b} refine @ true calibration", {})
+        parts.append(
+            f"`{b}` {pct(r.get('mae_all_cm'), raw)} vs the input and "
+            f"{pct(r.get('mae_all_cm'), classical)} vs the classical filter"
+        )
+    return (
+        f"The paper's ToF-KPN improves on its U-Net by {-100 * PAPER_KPN_VS_UNET:.0f} % MAE "
+        f"(Table 2). On aligned input, MAE all relative to the ToF input: "
+        + "; ".join(parts)
+        + "."
+    )
+
+
+def whole_paragraph(report: dict[str, Report]) -> str:
+    raw_paper, out_paper, oracle_paper = PAPER_WHOLE
+    parts = []
+    raw = report["raw-tof"]["mae_all_cm"]
+    for b in bundles(report):
+        out = report.get(b, {}).get("mae_all_cm")
+        oracle = report.get(f"{b} refine @ true calibration", {}).get("mae_all_cm")
+        parts.append(
+            f"`{b}` {fmt(raw)} → {fmt(out)} cm ({pct(out, raw)}), "
+            f"{fmt(oracle)} cm at the true calibration"
+        )
+    return (
+        f"The paper's whole pipeline takes misaligned ToF depth from {raw_paper} to "
+        f"{out_paper} cm ({pct(out_paper, raw_paper)}), against {oracle_paper} cm when "
+        f"refining at the true alignment. Ours at σ = 4 px: " + "; ".join(parts) + "."
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument(
+        "--eval", type=Path, required=True, help="dear eval outputs per set"
+    )
+    parser.add_argument("--out", type=Path, required=True, help="RESULTS.md to write")
+    parser.add_argument("--figures", type=Path, required=True, help="where figures go")
+    parser.add_argument(
+        "--commentary",
+        type=Path,
+        default=Path(__file__).with_name("results_commentary.md"),
+        help="hand-written discussion appended after the tables",
+    )
+    args = parser.parse_args()
+
+    aligned = load(args.eval, "aligned")
+    sets = {s: load(args.eval, f"sigma{s}") for s in SIGMAS}
+    frames = aligned["__file__"]["frames_evaluated"]
+    sequence = load(args.eval, "sequence")
+
+    if args.figures.exists():
+        shutil.rmtree(args.figures)
+    args.figures.mkdir(parents=True)
+    figure_lines = []
+    for name in ("aligned", "sigma4"):
+        data = load(args.eval, name)["__file__"]
+        for f in data["figures"]:
+            target = args.figures / f"{name}-{Path(f).name}"
+            shutil.copyfile(args.eval / name / f, target)
+            figure_lines.append(f"![{name}: {Path(f).name}]({target.as_posix()})")
+
+    doc = [
+        "# Results",
+        "",
+        (
+            "Regenerate with `scripts/results.sh` (fixed-seed test sets from `dear-synth`, then "
+            "`dear eval` on each; the numbers below are copied from its `eval.json` files by "
+            "`scripts/results.py`). Test sets: "
+            f"{frames} frames at 320×240 rendered with seed 9001, and misaligned copies at "
+            "the paper's σ = 2, 4, 6 px (pixels of a 640×480 image; rendered as σ = 1, 2, 3 px at 320×240, seed 4). Every method runs through `dear-pipeline`, the code the "
+            "daemon runs; times are medians on the 2-core development machine, tract on one "
+            "thread."
+        ),
+        "",
+        "## Alignment: AEPE of the flow (paper Table 1)",
+        "",
+        *table_alignment(sets),
+        "",
+        alignment_paragraph(sets),
+        "",
+        "## Refinement on aligned input: MAE within 4 m (paper Tables 2 and 3)",
+        "",
+        (
+            "Pixels are ranked by the *input's* error: low 0–25 %, mid 25–50 %, high 50–75 %; "
+            "all includes the worst quarter."
+        ),
+        "",
+        *table_refinement(aligned),
+        "",
+        refinement_paragraph(aligned),
+        "",
+        "## Whole pipeline on misaligned input (σ = 4 px)",
+        "",
+        *table_whole(sets[4]),
+        "",
+        whole_paragraph(sets[4]),
+        "",
+        "## Online recalibration on a drifting calibration (beyond the paper)",
+        "",
+        (
+            f"{sequence['__file__']['frames_evaluated']} frames of a moving scene whose "
+            "principal point drifts (sinusoids, 4 px peak; `dear-synth sequence --seed 77`). "
+            "AEPE is the error of the flow each frame was aligned with; the per-frame error "
+            "over time is in `out/results/sequence/tracking.csv`. ms / frame of the per-frame "
+            "row excludes the alignment residual; the online row includes it (its trigger "
+            "needs it)."
+        ),
+        "",
+        *table_tracking(sequence),
+        "",
+    ]
+    doc += [
+        "## Cost at 640×480",
+        "",
+        (
+            "`cargo bench -p dear-pipeline --bench dear_chain` with `models/edge` (tract on one "
+            "thread, as the daemon runs it) and `dear-bench-onnx --bundle models/edge` "
+            "(onnxruntime, the same ONNX files). Frame rows include preprocessing, the "
+            "geometry, the warps and the confidence map."
+        ),
+        "",
+        *table_latency(
+            Path("target/criterion/dear_chain_vga"), args.eval / "onnxruntime.json", 30
+        ),
+        "",
+    ]
+    if args.commentary.is_file():
+        doc += [args.commentary.read_text().rstrip(), ""]
+    doc += [
+        "## Figures",
+        "",
+        (
+            "Panels: RGB | amplitude | ToF depth | result | ground truth | |error| (0–20 cm). "
+            "Blends: depth over RGB before | after alignment. Scan lines: ToF (grey), result (red), "
+            "ground truth (green) along one row."
+        ),
+        "",
+        *figure_lines,
+        "",
+    ]
+    args.out.write_text("\n".join(doc))
+
+
+if __name__ == "__main__":
+    main()
