@@ -183,7 +183,11 @@ mod tests {
         for ((p, &z), &valid) in out.indexed_iter().zip(&truth.valid) {
             if valid {
                 truth_valid += 1;
-                assert!((z - truth.depth[p]).abs() < 1e-4, "{p:?}: {z} vs {}", truth.depth[p]);
+                assert!(
+                    (z - truth.depth[p]).abs() < 1e-4,
+                    "{p:?}: {z} vs {}",
+                    truth.depth[p]
+                );
                 let (u, v) = calib.flow_at(z).unwrap();
                 assert!((aligner.flow().u[p] - u).abs() < 1e-5);
                 assert!((aligner.flow().v[p] - v).abs() < 1e-5);
