@@ -130,11 +130,14 @@ class FlowNetC(nn.Module):
         up_flow = crop_like(up_layer(flow), skip)
         return torch.cat([skip, up_feat, up_flow], dim=1)
 
-    def _prior_at(self, prior: torch.Tensor, out: torch.Tensor, rgb: torch.Tensor) -> torch.Tensor:
-        """The prior flow resampled to the grid of ``out`` (a 1/2^k-resolution output)."""
+    def _prior_at(self, prior: torch.Tensor, out: torch.Tensor, stride: int) -> torch.Tensor:
+        """The prior flow resampled to the grid of ``out``, an output at 1/``stride`` resolution.
+
+        ``stride`` is a Python int known from the architecture (not read from tensor shapes), so
+        the resize has a constant scale when the graph is traced for export.
+        """
         assert self.prior is not None
-        level = round(rgb.shape[-1] / out.shape[-1])  # 2^k: outputs are ceil(W / 2^k) wide
-        return resize_like(prior, out, self.prior.scale // level)
+        return resize_like(prior, out, self.prior.scale // stride)
 
     def forward(self, rgb: torch.Tensor, amplitude: torch.Tensor) -> list[torch.Tensor]:
         cfg = self.config
@@ -168,5 +171,8 @@ class FlowNetC(nn.Module):
         outs = [f * cfg.flow_scale for f in [*flows, full]]
         if self.prior is not None:
             prior = self.prior(rgb, amplitude)
-            outs = [o + self._prior_at(prior, o, rgb) for o in outs]
+            # Output strides, coarse to fine: flow6 (1/64, six levels only), flow5 … flow2
+            # (1/32 … 1/4), and the full-resolution flow.
+            strides = [64, 32, 16, 8, 4, 1][6 - cfg.levels :]
+            outs = [o + self._prior_at(prior, o, k) for o, k in zip(outs, strides, strict=True)]
         return outs
