@@ -94,9 +94,8 @@ impl Default for CaptureConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PipelineConfig {
-    /// `"dear"`: the DEAR chain with the model bundle `bundle`;
-    /// `"classical"` (the default until a trained bundle ships): static calibration + the
-    /// edge-aware filter, no networks;
+    /// `"dear"` (the default): the DEAR chain with the model bundle `bundle`;
+    /// `"classical"`: static calibration + the edge-aware filter, no networks;
     /// `"none"`: static calibration, alignment only.
     pub refine: RefineMode,
     /// Model bundle directory for `refine = "dear"`, relative to the working directory.
@@ -114,7 +113,7 @@ pub struct PipelineConfig {
 impl Default for PipelineConfig {
     fn default() -> Self {
         PipelineConfig {
-            refine: RefineMode::Classical,
+            refine: RefineMode::Dear,
             bundle: PathBuf::from("models/edge"),
             calibration: CalibrationMode::Online,
             online_interval_frames: 30,

@@ -93,56 +93,58 @@ fn splat_front(
     rgb: Option<ArrayView3<u8>>,
 ) -> FrontSurface {
     let (h, w) = depth.dim();
-    // Landing points of the valid sources, computed once.
-    let landing = |y: usize, x: usize| -> Option<(f32, f32, f32)> {
-        let z = depth[(y, x)];
-        if !is_valid_depth(z) {
-            return None;
-        }
-        let (fu, fv) = perturbation.flow_at(z)?;
-        Some((x as f32 - fu, y as f32 - fv, z))
-    };
+    // Landing points of the valid sources, computed once: (source y, x, landing x, y, depth).
+    // The passes index flat buffers: the daemon runs this on every frame, and the tests run
+    // the daemon unoptimised, where 2-D ndarray indexing costs several times more.
+    let sources: Vec<(usize, usize, f32, f32, f32)> = depth
+        .indexed_iter()
+        .filter_map(|((y, x), &z)| {
+            if !is_valid_depth(z) {
+                return None;
+            }
+            let (fu, fv) = perturbation.flow_at(z)?;
+            Some((y, x, x as f32 - fu, y as f32 - fv, z))
+        })
+        .collect();
 
     // Pass 1: z-buffer.
-    let mut zbuf = Array2::from_elem((h, w), f32::INFINITY);
-    for y in 0..h {
-        for x in 0..w {
-            if let Some((tx, ty, z)) = landing(y, x) {
-                for (t, _) in splat_taps(tx, ty, h, w) {
-                    if z < zbuf[t] {
-                        zbuf[t] = z;
-                    }
-                }
+    let mut zbuf = vec![f32::INFINITY; h * w];
+    for &(_, _, tx, ty, z) in &sources {
+        for ((ty, tx), _) in splat_taps(tx, ty, h, w) {
+            let t = ty * w + tx;
+            if z < zbuf[t] {
+                zbuf[t] = z;
             }
         }
     }
 
     // Pass 2: accumulate the front surface.
-    let mut front = FrontSurface {
-        weight: Array2::zeros((h, w)),
-        any_weight: Array2::zeros((h, w)),
-        depth_sum: Array2::zeros((h, w)),
-        colour_sum: rgb.map(|rgb| Array3::zeros((h, w, rgb.dim().2))),
-    };
-    for y in 0..h {
-        for x in 0..w {
-            if let Some((tx, ty, z)) = landing(y, x) {
-                for (t, wt) in splat_taps(tx, ty, h, w) {
-                    front.any_weight[t] += wt;
-                    if same_surface(zbuf[t], z) {
-                        front.weight[t] += wt;
-                        front.depth_sum[t] += wt * z;
-                        if let (Some(csum), Some(rgb)) = (&mut front.colour_sum, &rgb) {
-                            for ch in 0..rgb.dim().2 {
-                                csum[(t.0, t.1, ch)] += wt * f32::from(rgb[(y, x, ch)]);
-                            }
-                        }
+    let mut weight = vec![0.0f32; h * w];
+    let mut any_weight = vec![0.0f32; h * w];
+    let mut depth_sum = vec![0.0f32; h * w];
+    let mut colour_sum = rgb.map(|rgb| Array3::zeros((h, w, rgb.dim().2)));
+    for &(sy, sx, tx, ty, z) in &sources {
+        for ((ty, tx), wt) in splat_taps(tx, ty, h, w) {
+            let t = ty * w + tx;
+            any_weight[t] += wt;
+            if same_surface(zbuf[t], z) {
+                weight[t] += wt;
+                depth_sum[t] += wt * z;
+                if let (Some(csum), Some(rgb)) = (&mut colour_sum, &rgb) {
+                    for ch in 0..rgb.dim().2 {
+                        csum[(ty, tx, ch)] += wt * f32::from(rgb[(sy, sx, ch)]);
                     }
                 }
             }
         }
     }
-    front
+    let grid = |v: Vec<f32>| Array2::from_shape_vec((h, w), v).expect("h·w values");
+    FrontSurface {
+        weight: grid(weight),
+        any_weight: grid(any_weight),
+        depth_sum: grid(depth_sum),
+        colour_sum,
+    }
 }
 
 /// The depth of `depth`'s surfaces as seen from the view `perturbation` describes: each pixel

@@ -1,0 +1,56 @@
+//! The bundle the daemon runs by default (`models/edge`): it verifies, it was trained (its
+//! manifest records the recipe and validation metrics), and through tract it makes the
+//! bundled sample's depth better than the ToF input, measured against the sample's ground
+//! truth with the same evaluation code as `dear eval`.
+#![cfg(feature = "inference")]
+
+use std::path::{Path, PathBuf};
+
+use dear_pipeline::capture::CaptureDir;
+use dear_pipeline::evaluate::{
+    ground_truth_flow, ground_truth_mask, BundleMethod, Evaluation, Method, MethodRunner,
+};
+use dear_pipeline::model::ModelBundle;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+#[test]
+fn the_shipped_edge_bundle_is_trained_and_improves_the_sample() {
+    let dir = root().join("models/edge");
+    let bundle = ModelBundle::load(&dir).expect("models/edge verifies");
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("model.json")).unwrap()).unwrap();
+    assert_eq!(manifest["tier"], "edge");
+    let validation = &manifest["validation"];
+    assert!(
+        validation["aepe_rough"].as_f64().is_some(),
+        "model.json records validation metrics: {validation}"
+    );
+
+    let capture = CaptureDir::open(root().join("samples/demo")).unwrap();
+    let (w, h) = capture.size();
+    let (w, h) = (w as usize, h as usize);
+    let mut chain = BundleMethod::new(&bundle, "edge", h, w).unwrap();
+    let mut classical = MethodRunner::new(h, w, capture.manifest().initial_calibration);
+    let mut eval = Evaluation::new();
+    for position in [0, capture.len() / 2, capture.len() - 1] {
+        let frame = capture.read_frame(position).unwrap();
+        let valid = ground_truth_mask(&frame).unwrap();
+        let truth = ground_truth_flow(&frame);
+        let raw = classical.run(Method::RawTof, &frame).unwrap();
+        eval.add("input", &frame, &raw, valid.view(), truth.as_ref());
+        let out = chain.run(&frame).unwrap();
+        eval.add("edge", &frame, &out.refined, valid.view(), truth.as_ref());
+    }
+    let reports = eval.reports();
+    let (input, edge) = (&reports[0], &reports[1]);
+    let (mae_in, mae_out) = (input.mae_all_cm.unwrap(), edge.mae_all_cm.unwrap());
+    assert!(
+        mae_out < 0.9 * mae_in,
+        "the shipped bundle should cut the sample's depth error by more than 10 %: \
+         {mae_in:.2} cm in, {mae_out:.2} cm out"
+    );
+    assert!(edge.coverage > 0.95, "coverage {}", edge.coverage);
+}
