@@ -10,6 +10,8 @@ echo "== cargo clippy"; cargo clippy --workspace --all-targets --quiet -- -D war
 echo "== cargo test";   cargo test --workspace
 
 if [ -d train ]; then
-    echo "== ruff";   .venv/bin/ruff check train && .venv/bin/ruff format --check train
+    # Two commands, not `a && b`: errexit ignores a failure on the left of `&&`.
+    echo "== ruff";   .venv/bin/ruff check train
+    .venv/bin/ruff format --check train
     echo "== pytest"; (cd train && ../.venv/bin/python -m pytest -q tests)
 fi

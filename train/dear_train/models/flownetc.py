@@ -15,7 +15,6 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
-from dear_train.models.matching import EdgeMatchingPrior
 from dear_train.models.layers import (
     Correlation,
     conv,
@@ -26,6 +25,7 @@ from dear_train.models.layers import (
     scaled,
     upsample_flow,
 )
+from dear_train.models.matching import EdgeMatchingPrior
 
 
 @dataclass(frozen=True)
