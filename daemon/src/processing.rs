@@ -199,14 +199,9 @@ impl Processor {
                 online,
                 bundle_name,
             } => {
-                let decision = online.as_mut().map(OnlineCalibrator::begin_frame);
-                let mode = match decision {
-                    Some(d) => match (d.run_network, d.calibration) {
-                        (None, Some(estimate)) => ChainMode::Cached(estimate),
-                        _ => ChainMode::Full,
-                    },
-                    None => ChainMode::Full,
-                };
+                let mode = online
+                    .as_mut()
+                    .map_or(ChainMode::Full, |o| o.begin_frame().chain_mode());
                 let input = ChainInput {
                     rgb: frame.rgb.view(),
                     amplitude: frame.amplitude.view(),

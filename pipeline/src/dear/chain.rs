@@ -31,6 +31,17 @@ pub enum ChainMode {
     Cached(Calibration),
 }
 
+impl crate::online::FrameDecision {
+    /// The chain mode this decision calls for: `Cached` with the current estimate when the
+    /// network does not run, `Full` otherwise (also before any estimate exists).
+    pub fn chain_mode(&self) -> ChainMode {
+        match (self.run_network, self.calibration) {
+            (None, Some(estimate)) => ChainMode::Cached(estimate),
+            _ => ChainMode::Full,
+        }
+    }
+}
+
 /// What `Cached` mode does about the fusion network.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CachedFusion {

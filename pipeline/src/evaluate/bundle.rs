@@ -140,11 +140,7 @@ impl BundleMethod {
         frame: &RgbdFrame,
         online: &mut OnlineCalibrator,
     ) -> Result<(MethodOutput, ChainReport), ChainError> {
-        let decision = online.begin_frame();
-        let mode = match (decision.run_network, decision.calibration) {
-            (None, Some(estimate)) => ChainMode::Cached(estimate),
-            _ => ChainMode::Full,
-        };
+        let mode = online.begin_frame().chain_mode();
         let report = self.process(frame, mode)?;
         online.end_frame(report.measurement.clone(), report.alignment_residual);
         let output = MethodOutput {
