@@ -105,6 +105,9 @@ pub struct PipelineConfig {
     /// With `calibration = "online"`: frames between runs of the rough-flow network (it also
     /// runs early when the alignment residual grows).
     pub online_interval_frames: u32,
+    /// With `calibration = "online"`: fraction of the per-frame edge-alignment correction of
+    /// the principal point applied between network runs (0 turns tracking off; 0.7 default).
+    pub online_track_gain: f32,
     /// Static calibration for `classical`/`none`, and the DEAR engine's fallback before its
     /// first estimate; none = the capture's `initial_calibration`.
     pub static_calibration: Option<Calibration>,
@@ -117,6 +120,7 @@ impl Default for PipelineConfig {
             bundle: PathBuf::from("models/edge"),
             calibration: CalibrationMode::Online,
             online_interval_frames: 30,
+            online_track_gain: 0.7,
             static_calibration: None,
         }
     }
@@ -201,6 +205,12 @@ impl Config {
         }
         if self.pipeline.online_interval_frames == 0 {
             return Err("[pipeline] online_interval_frames must be at least 1".into());
+        }
+        let gain = self.pipeline.online_track_gain;
+        if !(0.0..=1.0).contains(&gain) {
+            return Err(format!(
+                "[pipeline] online_track_gain = {gain} must be within 0..=1 (0 turns tracking off)"
+            ));
         }
         if !(self.runtime.stats_interval_s > 0.0 && self.runtime.stats_interval_s.is_finite()) {
             return Err(format!(

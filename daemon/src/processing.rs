@@ -104,6 +104,7 @@ impl Processor {
         let online = match config.calibration {
             CalibrationMode::Online => Some(OnlineCalibrator::new(OnlineConfig {
                 interval_frames: config.online_interval_frames,
+                track_gain: config.online_track_gain,
                 ..OnlineConfig::default()
             })),
             CalibrationMode::EveryFrame => None,
@@ -226,7 +227,7 @@ impl Processor {
                 header.set_bundle_name(bundle_name);
                 match online {
                     Some(online) => {
-                        online.end_frame(report.measurement.clone(), report.alignment_residual);
+                        online.end_frame(report.measurement.clone(), report.alignment);
                         header.flags |= flags::CALIBRATION_ONLINE;
                         // Until the first estimate is established, publish what aligned this frame.
                         let calibration = online

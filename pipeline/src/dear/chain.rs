@@ -19,7 +19,7 @@ use crate::frame::Flow;
 use crate::geometry::surface::is_valid_depth;
 use crate::geometry::{warp_bilinear, warp_depth, LsqError, RobustOptions};
 use crate::model::{BundleError, BundleRunner, ModelBundle, Normalisation, RunnerOptions};
-use crate::online::residual::edge_disagreement;
+use crate::online::residual::{EdgeAlignment, EdgeCheck};
 use crate::online::Measurement;
 
 /// How one frame is aligned.
@@ -67,20 +67,25 @@ pub struct ChainOptions {
     pub inlier_threshold_px: f32,
     /// `Cached` mode and the fusion network.
     pub cached_fusion: CachedFusion,
-    /// Compute [`ChainReport::alignment_residual`] (a few ms at VGA).
-    pub alignment_residual: bool,
+    /// Compute [`ChainReport::alignment`] (about 1 ms at any resolution).
+    pub alignment_check: bool,
+    /// Largest principal-point correction the alignment check searches, px (0: only the
+    /// disagreement, no edge shift).
+    pub shift_search_px: usize,
     /// tract execution.
     pub runner: RunnerOptions,
 }
 
 impl Default for ChainOptions {
-    /// Huber δ = 1 px, outliers beyond 3 px, fusion skipped in `Cached` mode, residual on.
+    /// Huber δ = 1 px, outliers beyond 3 px, fusion skipped in `Cached` mode, alignment check
+    /// on with a ±3 px shift search (the sequences' principal point moves < 0.5 px per frame).
     fn default() -> Self {
         ChainOptions {
             robust: RobustOptions::default(),
             inlier_threshold_px: 3.0,
             cached_fusion: CachedFusion::Skip,
-            alignment_residual: true,
+            alignment_check: true,
+            shift_search_px: 3,
             runner: RunnerOptions::default(),
         }
     }
@@ -154,9 +159,9 @@ pub struct ChainReport {
     pub valid_fraction: f32,
     /// The amplitude normalisation scale (`None`: no valid depth, amplitude input all zero).
     pub amplitude_scale: Option<f32>,
-    /// Edge disagreement between RGB and the warped amplitude (see
-    /// [`edge_disagreement`]); the online estimator's trigger signal.
-    pub alignment_residual: Option<f32>,
+    /// Edge alignment between RGB and the warped amplitude (see [`EdgeCheck`]): the online
+    /// estimator's trigger signal and its principal-point tracker.
+    pub alignment: Option<EdgeAlignment>,
     /// Stage timings.
     pub timings: StageTimings,
 }
@@ -186,6 +191,7 @@ pub struct DearChain {
     norm: Normalisation,
     options: ChainOptions,
     aligner: StaticAligner,
+    edge_check: EdgeCheck,
     scratch: Vec<f32>,
     rgb: [Array2<f32>; 3],
     amplitude: Array2<f32>,
@@ -225,6 +231,7 @@ impl DearChain {
             norm: bundle.normalisation(),
             options,
             aligner: StaticAligner::new(height, width),
+            edge_check: EdgeCheck::new(options.shift_search_px),
             scratch: Vec::with_capacity(height * width),
             rgb: [plane(), plane(), plane()],
             amplitude: plane(),
@@ -413,8 +420,8 @@ impl DearChain {
         confidence_into(self.depth_warped.view(), self.refined.view(), confidence);
         lap(&mut t.refine);
 
-        let alignment_residual = if self.options.alignment_residual {
-            let r = edge_disagreement(
+        let alignment = if self.options.alignment_check {
+            let r = self.edge_check.measure(
                 input.rgb,
                 self.amplitude_warped.view(),
                 self.depth_warped.view(),
@@ -432,7 +439,7 @@ impl DearChain {
             measurement,
             valid_fraction: valid as f32 / (h * w) as f32,
             amplitude_scale,
-            alignment_residual,
+            alignment,
             timings: t,
         })
     }

@@ -142,7 +142,7 @@ impl BundleMethod {
     ) -> Result<(MethodOutput, ChainReport), ChainError> {
         let mode = online.begin_frame().chain_mode();
         let report = self.process(frame, mode)?;
-        online.end_frame(report.measurement.clone(), report.alignment_residual);
+        online.end_frame(report.measurement.clone(), report.alignment);
         let output = MethodOutput {
             depth: self.depth.clone(),
             flow: Some(self.chain.flow_refined().clone()),

@@ -5,7 +5,7 @@
 //! Per frame the caller asks [`OnlineCalibrator::begin_frame`] what to do, processes the frame
 //! (`Full` when told to run the network, otherwise `Cached` with the current estimate), then
 //! reports with [`OnlineCalibrator::end_frame`] the network frame's [`Measurement`] (if any)
-//! and the frame's alignment residual (if any).
+//! and the frame's edge alignment check (if any; see [`crate::online::residual`]).
 //!
 //! Filtering, in order:
 //! 1. *Admission*: a fit that failed, used fewer than `min_pixels`, explains less than
@@ -19,6 +19,15 @@
 //!    measurements — bounded influence for anything the gate lets through, and a lag of about
 //!    `window / 2` measurements on a drift.
 //!
+//! 4. *Principal-point tracking*: on frames without the network, the edge check's shift (the
+//!    correction of `c` that best lines up RGB and warped-amplitude edges) moves the estimate's
+//!    `c` by `track_gain` of it, at most `track_max_step_px` per frame, when its correlation
+//!    peak is clear (`track_min_ncc`). The accepted measurements move with it: they are
+//!    observations of a `c` that has since moved, and the median must not pull the estimate
+//!    back to where `c` was. `t` (depth-dependent; slow thermal drift) is left to the network.
+//!    Without this the estimate would lag OIS-like wander of the principal point (pixels per
+//!    second) by about `interval_frames · window / 2` frames.
+//!
 //! The network runs when there is no established estimate yet, every `interval_frames`, sooner
 //! (`retry_frames`) after a rejected measurement, and when the alignment residual has exceeded
 //! the value measured on the last network frame by `residual_trigger_ratio` for
@@ -29,6 +38,7 @@ use std::collections::VecDeque;
 use crate::calibration::Calibration;
 use crate::geometry::LsqError;
 use crate::online::measurement::Measurement;
+use crate::online::residual::EdgeAlignment;
 
 /// Settings of [`OnlineCalibrator`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -61,11 +71,18 @@ pub struct OnlineConfig {
     pub residual_trigger_margin: f32,
     /// Consecutive frames above the trigger level before the network runs.
     pub residual_trigger_frames: u32,
+    /// Fraction of the edge shift applied to `c` per frame (0 turns tracking off).
+    pub track_gain: f32,
+    /// Smallest peak NCC of an edge shift that is used.
+    pub track_min_ncc: f32,
+    /// Largest change of `c` per frame from tracking, px.
+    pub track_max_step_px: f32,
 }
 
 impl Default for OnlineConfig {
     /// Every 30 frames (1 s at 30 fps; drift is far slower), median of 5, gate 3 px over
-    /// 0.3–5 m, jumps confirmed by 3 measurements, residual trigger +25 % for 3 frames.
+    /// 0.3–5 m, jumps confirmed by 3 measurements, residual trigger +25 % for 3 frames;
+    /// `c` tracked between network frames with gain 0.7, peaks with NCC ≥ 0.1, ≤ 1 px/frame.
     fn default() -> Self {
         OnlineConfig {
             interval_frames: 30,
@@ -81,6 +98,9 @@ impl Default for OnlineConfig {
             residual_trigger_ratio: 0.25,
             residual_trigger_margin: 0.02,
             residual_trigger_frames: 3,
+            track_gain: 0.7,
+            track_min_ncc: 0.1,
+            track_max_step_px: 1.0,
         }
     }
 }
@@ -215,13 +235,17 @@ impl OnlineCalibrator {
     }
 
     /// Ends a frame: the network frame's fit (`None` when the network did not run) and the
-    /// frame's alignment residual. Returns what became of the measurement.
+    /// frame's edge alignment check. Returns what became of the measurement.
     pub fn end_frame(
         &mut self,
         measurement: Option<Result<Measurement, LsqError>>,
-        residual: Option<f32>,
+        alignment: Option<EdgeAlignment>,
     ) -> Option<Outcome> {
+        let residual = alignment.map(|a| a.disagreement);
         let outcome = measurement.map(|m| self.observe(m));
+        if !self.this_frame_network {
+            self.track(alignment);
+        }
         if self.this_frame_network {
             self.last_network_frame = Some(self.frame);
             self.residual_triggered = false;
@@ -244,6 +268,38 @@ impl OnlineCalibrator {
         }
         self.this_frame_network = false;
         outcome
+    }
+
+    /// Moves `c` (estimate, accepted and held-back measurements) by the edge shift.
+    fn track(&mut self, alignment: Option<EdgeAlignment>) {
+        let Some(shift) = alignment.and_then(|a| a.shift) else {
+            return;
+        };
+        let Some(estimate) = self.estimate.as_mut() else {
+            return;
+        };
+        if self.config.track_gain <= 0.0
+            || !(shift.peak_ncc >= self.config.track_min_ncc)
+            || !(shift.du.is_finite() && shift.dv.is_finite())
+        {
+            return;
+        }
+        let (mut du, mut dv) = (
+            shift.du * self.config.track_gain,
+            shift.dv * self.config.track_gain,
+        );
+        let step = du.hypot(dv);
+        if step > self.config.track_max_step_px {
+            let k = self.config.track_max_step_px / step;
+            du *= k;
+            dv *= k;
+        }
+        estimate.cx += du;
+        estimate.cy += dv;
+        for m in self.accepted.iter_mut().chain(self.pending.iter_mut()) {
+            m.calibration.cx += du;
+            m.calibration.cy += dv;
+        }
     }
 
     fn observe(&mut self, m: Result<Measurement, LsqError>) -> Outcome {
@@ -697,6 +753,82 @@ mod tests {
         assert!(est3.quality() < 0.2 * q, "{} vs {q}", est3.quality());
     }
 
+    /// An edge check with this disagreement and no shift.
+    fn residual(r: f32) -> Option<EdgeAlignment> {
+        Some(EdgeAlignment {
+            disagreement: r,
+            shift: None,
+        })
+    }
+
+    /// An edge check that says `c` must move by `(du, dv)`.
+    fn shifted(du: f32, dv: f32, peak_ncc: f32) -> Option<EdgeAlignment> {
+        Some(EdgeAlignment {
+            disagreement: 0.5,
+            shift: Some(crate::online::residual::EdgeShift {
+                du,
+                dv,
+                peak_ncc,
+                gain: 0.1,
+                at_limit: false,
+            }),
+        })
+    }
+
+    #[test]
+    fn the_edge_shift_tracks_the_principal_point_between_network_frames() {
+        let config = OnlineConfig {
+            interval_frames: 1000,
+            ..OnlineConfig::default()
+        };
+        let mut est = OnlineCalibrator::new(config);
+        for _ in 0..config.warmup_measurements {
+            est.begin_frame();
+            est.end_frame(Some(Ok(good(TRUE))), None);
+        }
+        // c_x wanders 0.3 px per frame; the edge check measures what is left over.
+        let mut truth = TRUE;
+        for _ in 0..40 {
+            truth.cx += 0.3;
+            let d = est.begin_frame();
+            assert_eq!(d.run_network, None);
+            let e = d.calibration.unwrap();
+            est.end_frame(None, shifted(truth.cx - e.cx, truth.cy - e.cy, 0.4));
+        }
+        let e = est.estimate().unwrap();
+        // Steady-state lag of a gain-0.7 tracker: 0.3 · 0.3 / 0.7 ≈ 0.13 px.
+        assert!((e.cx - truth.cx).abs() < 0.2, "{e:?} vs {truth:?}");
+        assert_eq!((e.tx, e.ty, e.cy), (TRUE.tx, TRUE.ty, TRUE.cy));
+        // The next network measurement agrees with the tracked estimate: the history moved
+        // along, so the median does not drag c back 12 px to where it was.
+        est.begin_frame();
+        est.end_frame(Some(Ok(good(truth))), None);
+        assert!((est.estimate().unwrap().cx - truth.cx).abs() < 0.2);
+
+        // Unclear peaks, and steps above the limit, are not taken whole.
+        let before = est.estimate().unwrap();
+        est.begin_frame();
+        est.end_frame(None, shifted(2.0, 0.0, 0.05));
+        assert_eq!(est.estimate().unwrap(), before, "peak below track_min_ncc");
+        est.begin_frame();
+        est.end_frame(None, shifted(5.0, 0.0, 0.5));
+        let moved = est.estimate().unwrap().cx - before.cx;
+        assert!((moved - config.track_max_step_px).abs() < 1e-5, "{moved}");
+
+        // Tracking off: the estimate stays put.
+        let mut off = OnlineCalibrator::new(OnlineConfig {
+            track_gain: 0.0,
+            ..config
+        });
+        for _ in 0..config.warmup_measurements {
+            off.begin_frame();
+            off.end_frame(Some(Ok(good(TRUE))), None);
+        }
+        off.begin_frame();
+        off.end_frame(None, shifted(1.0, 1.0, 0.5));
+        assert_eq!(off.estimate(), Some(TRUE));
+    }
+
     #[test]
     fn a_growing_residual_triggers_the_network() {
         let mut est = OnlineCalibrator::new(OnlineConfig {
@@ -706,20 +838,20 @@ mod tests {
         // Warm-up frames with a residual of 0.4 set the baseline.
         for f in 0..3 {
             assert!(est.begin_frame().run_network.is_some());
-            est.end_frame(Some(Ok(good(noisy(TRUE, f)))), Some(0.4));
+            est.end_frame(Some(Ok(good(noisy(TRUE, f)))), residual(0.4));
         }
         // Small fluctuations do not trigger.
         for r in [0.41, 0.45, 0.39, 0.5, 0.42] {
             assert_eq!(est.begin_frame().run_network, None);
-            est.end_frame(None, Some(r));
+            est.end_frame(None, residual(r));
         }
         // Three frames above 0.4·1.25 + 0.02 = 0.52 do.
         for _ in 0..3 {
             assert_eq!(est.begin_frame().run_network, None);
-            est.end_frame(None, Some(0.7));
+            est.end_frame(None, residual(0.7));
         }
         assert_eq!(est.begin_frame().run_network, Some(Trigger::Residual));
-        est.end_frame(Some(Ok(good(TRUE))), Some(0.4));
+        est.end_frame(Some(Ok(good(TRUE))), residual(0.4));
         assert_eq!(est.begin_frame().run_network, None);
     }
 }

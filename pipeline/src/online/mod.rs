@@ -6,7 +6,8 @@
 //!   time (admission, innovation gate with jump confirmation, running median), with a quality
 //!   figure;
 //! - [`residual`]: a cheap per-frame alignment check (RGB vs warped-amplitude edges) that
-//!   triggers the network early when the alignment degrades.
+//!   triggers the network early when the alignment degrades, and measures the principal-point
+//!   correction the estimator tracks between network frames.
 //!
 //! Independent of tract: it works on flows and depths, whoever computed them.
 
@@ -16,3 +17,4 @@ pub mod residual;
 
 pub use estimator::{FrameDecision, OnlineCalibrator, OnlineConfig, Outcome, Rejection, Trigger};
 pub use measurement::Measurement;
+pub use residual::{EdgeAlignment, EdgeCheck, EdgeShift};

@@ -1,13 +1,25 @@
-//! A cheap per-frame alignment check for frames that do not run the rough-flow network.
+//! A cheap per-frame alignment check for frames that do not run the rough-flow network: how
+//! well the alignment holds, and which way the principal point has moved since the estimate.
 //!
 //! The RGB image and the ToF amplitude see the same surface markings and the same object
 //! outlines, so once the amplitude is warped onto the RGB grid their edges coincide when the
-//! alignment is right and drift apart when the calibration has moved. The signal is
-//! `1 − NCC(|∇L|, |∇A_w|)`, the normalised cross-correlation of the gradient magnitudes of the
-//! RGB luma `L` and the warped amplitude `A_w`, on a stride-2 grid of pixels whose warped depth
-//! and its 4 neighbours are valid. Its absolute value depends on the scene (RGB and IR textures
-//! differ), so the online estimator compares it with the value measured right after the last
-//! network estimate, not with a fixed threshold.
+//! alignment is right and drift apart when the calibration has moved. Two numbers come from
+//! the normalised cross-correlation (NCC) of the gradient magnitudes of the RGB luma `L` and
+//! the warped amplitude `A_w`, over a sparse grid of pixels whose warped depth and its 4
+//! neighbours are valid:
+//!
+//! - the *disagreement* `1 − NCC(|∇L|(p), |∇A_w|(p))`. Its absolute value depends on the scene
+//!   (RGB and IR textures differ), so the online estimator compares it with the value measured
+//!   right after the last network estimate, not with a fixed threshold;
+//! - the *edge shift* `δ = argmax_Δ NCC(|∇L|(p), |∇A_w|(p + Δ))` over integer `Δ` within
+//!   `±search_px`, refined to sub-pixel by a parabola through the neighbours of the peak.
+//!   `A_w(p) = A(p + Ŵ(p))` with `Ŵ = t̂/z + ĉ` the estimate's flow, and the true flow is
+//!   `t/z + c`; if only `c` moved (`c = ĉ + δ`, what OIS wander and thermal drift of the
+//!   principal point do frame to frame), the amplitude edge that belongs to the RGB edge at `p`
+//!   sits at `p + δ` in `A_w` wherever the depth is locally smooth. So `δ` is a direct, cheap
+//!   measurement of the principal-point correction — no network, ~1 ms — which the online
+//!   estimator uses to track `c` between network frames. `t` (depth-dependent) is left to the
+//!   network.
 
 use ndarray::{ArrayView2, ArrayView3};
 
@@ -16,59 +28,232 @@ use crate::geometry::surface::is_valid_depth;
 /// Fewest sampled pixels for a meaningful correlation.
 pub const MIN_SAMPLES: usize = 64;
 
-/// `1 − NCC` of the gradient magnitudes (0 = edges agree perfectly, 1 = uncorrelated, up to 2),
-/// or `None` when fewer than [`MIN_SAMPLES`] pixels qualify or either image is flat there.
-///
-/// Images of different shapes give `None`.
-pub fn edge_disagreement(
-    rgb: ArrayView3<u8>,
-    warped_amplitude: ArrayView2<f32>,
-    warped_depth: ArrayView2<f32>,
-) -> Option<f32> {
-    let (h, w) = warped_depth.dim();
-    if rgb.dim() != (h, w, 3) || warped_amplitude.dim() != (h, w) || h < 3 || w < 3 {
-        return None;
+/// About this many pixels are sampled whatever the resolution (the grid's stride grows with the
+/// image), so the check costs the same ~1 ms at 320×240 and at 640×480.
+const TARGET_SAMPLES: usize = 20_000;
+
+/// The principal-point correction measured from the edges (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgeShift {
+    /// Correction of `c_x`, px (RGB grid).
+    pub du: f32,
+    /// Correction of `c_y`, px.
+    pub dv: f32,
+    /// NCC at the peak.
+    pub peak_ncc: f32,
+    /// NCC at the peak minus NCC at zero shift (≥ 0): how much the shift explains.
+    pub gain: f32,
+    /// The peak lies on the border of the search window: the true shift may be larger.
+    pub at_limit: bool,
+}
+
+/// One frame's alignment check.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgeAlignment {
+    /// `1 − NCC` at zero shift (0 = edges agree perfectly, 1 = uncorrelated, up to 2).
+    pub disagreement: f32,
+    /// The edge shift; `None` when the correlation has no clear peak (flat in a direction, or
+    /// too few samples at some shift).
+    pub shift: Option<EdgeShift>,
+}
+
+/// The check with its buffers (allocated once per resolution; the daemon calls it per frame).
+#[derive(Debug, Clone)]
+pub struct EdgeCheck {
+    search_px: usize,
+    luma_gradient: Vec<f32>,
+    amplitude_gradient: Vec<f32>,
+    valid: Vec<bool>,
+    samples: Vec<u32>,
+    ncc: Vec<f32>,
+}
+
+/// Running sums of one NCC.
+#[derive(Debug, Clone, Copy, Default)]
+struct Sums {
+    n: usize,
+    a: f64,
+    b: f64,
+    aa: f64,
+    bb: f64,
+    ab: f64,
+}
+
+impl Sums {
+    fn add(&mut self, a: f32, b: f32) {
+        let (a, b) = (f64::from(a), f64::from(b));
+        self.n += 1;
+        self.a += a;
+        self.b += b;
+        self.aa += a * a;
+        self.bb += b * b;
+        self.ab += a * b;
     }
-    let luma = |y: usize, x: usize| {
-        0.299 * f64::from(rgb[[y, x, 0]])
-            + 0.587 * f64::from(rgb[[y, x, 1]])
-            + 0.114 * f64::from(rgb[[y, x, 2]])
-    };
-    let (mut n, mut sa, mut sb, mut saa, mut sbb, mut sab) = (0usize, 0.0, 0.0, 0.0, 0.0, 0.0);
-    for y in (1..h - 1).step_by(2) {
-        for x in (1..w - 1).step_by(2) {
-            let ok = [(y, x), (y - 1, x), (y + 1, x), (y, x - 1), (y, x + 1)]
-                .iter()
-                .all(|&p| is_valid_depth(warped_depth[p]));
-            if !ok {
-                continue;
-            }
-            let gl =
-                (luma(y, x + 1) - luma(y, x - 1)).hypot(luma(y + 1, x) - luma(y - 1, x)) / 255.0;
-            let a = |yy: usize, xx: usize| f64::from(warped_amplitude[[yy, xx]]);
-            let ga = (a(y, x + 1) - a(y, x - 1)).hypot(a(y + 1, x) - a(y - 1, x));
-            if !ga.is_finite() {
-                continue;
-            }
-            n += 1;
-            sa += gl;
-            sb += ga;
-            saa += gl * gl;
-            sbb += ga * ga;
-            sab += gl * ga;
+
+    fn ncc(&self) -> Option<f32> {
+        if self.n < MIN_SAMPLES {
+            return None;
+        }
+        let n = self.n as f64;
+        let va = self.aa / n - (self.a / n).powi(2);
+        let vb = self.bb / n - (self.b / n).powi(2);
+        let cov = self.ab / n - self.a * self.b / (n * n);
+        (va > 1e-12 && vb > 1e-12).then(|| (cov / (va.sqrt() * vb.sqrt())) as f32)
+    }
+}
+
+impl EdgeCheck {
+    /// A check that searches shifts within `±search_px` (0: disagreement only).
+    pub fn new(search_px: usize) -> Self {
+        EdgeCheck {
+            search_px,
+            luma_gradient: Vec::new(),
+            amplitude_gradient: Vec::new(),
+            valid: Vec::new(),
+            samples: Vec::new(),
+            ncc: Vec::new(),
         }
     }
-    if n < MIN_SAMPLES {
-        return None;
+
+    /// Measures the alignment of `rgb` `(H, W, 3)` with `warped_amplitude` `(H, W)` where
+    /// `warped_depth` is valid. `None` when fewer than [`MIN_SAMPLES`] pixels qualify, either
+    /// image is flat there, or the shapes differ.
+    pub fn measure(
+        &mut self,
+        rgb: ArrayView3<u8>,
+        warped_amplitude: ArrayView2<f32>,
+        warped_depth: ArrayView2<f32>,
+    ) -> Option<EdgeAlignment> {
+        let (h, w) = warped_depth.dim();
+        let r = self.search_px;
+        if rgb.dim() != (h, w, 3)
+            || warped_amplitude.dim() != (h, w)
+            || h < 2 * r + 3
+            || w < 2 * r + 3
+        {
+            return None;
+        }
+        self.gradients(rgb, warped_amplitude, warped_depth);
+
+        // Sample pixels at least r + 1 from the border so every shifted index is inside.
+        let stride = ((h * w) as f64 / TARGET_SAMPLES as f64).sqrt().round().max(2.0) as usize;
+        self.samples.clear();
+        for y in (r + 1..h - r - 1).step_by(stride) {
+            for x in (r + 1..w - r - 1).step_by(stride) {
+                let i = y * w + x;
+                if self.valid[i] {
+                    self.samples.push(i as u32);
+                }
+            }
+        }
+
+        let side = 2 * r + 1;
+        self.ncc.clear();
+        self.ncc.resize(side * side, f32::NAN);
+        for dy in 0..side {
+            for dx in 0..side {
+                let offset = (dy as isize - r as isize) * w as isize + (dx as isize - r as isize);
+                let mut s = Sums::default();
+                for &i in &self.samples {
+                    let j = (i as isize + offset) as usize;
+                    if self.valid[j] {
+                        s.add(self.luma_gradient[i as usize], self.amplitude_gradient[j]);
+                    }
+                }
+                self.ncc[dy * side + dx] = s.ncc().unwrap_or(f32::NAN);
+            }
+        }
+        let at = |dx: usize, dy: usize| self.ncc[dy * side + dx];
+        let zero = at(r, r);
+        if !zero.is_finite() {
+            return None;
+        }
+        Some(EdgeAlignment {
+            disagreement: 1.0 - zero,
+            shift: self.peak(zero),
+        })
     }
-    let nf = n as f64;
-    let va = saa / nf - (sa / nf).powi(2);
-    let vb = sbb / nf - (sb / nf).powi(2);
-    let cov = sab / nf - sa * sb / (nf * nf);
-    if !(va > 1e-12 && vb > 1e-12) {
-        return None;
+
+    /// The NCC peak with sub-pixel refinement, if it is a clear one.
+    fn peak(&self, zero: f32) -> Option<EdgeShift> {
+        let r = self.search_px;
+        let side = 2 * r + 1;
+        if r == 0 || self.ncc.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        let best = (0..side * side).max_by(|&a, &b| self.ncc[a].total_cmp(&self.ncc[b]))?;
+        let (bx, by) = (best % side, best / side);
+        let peak = self.ncc[best];
+        // Parabola through the peak and its neighbours along one axis; none on the border.
+        let refine = |prev: Option<f32>, next: Option<f32>| -> Option<f32> {
+            let (Some(p), Some(n)) = (prev, next) else {
+                return Some(0.0);
+            };
+            let curvature = p - 2.0 * peak + n;
+            // A flat direction (no edges across it) has no peak to speak of.
+            (curvature < -1e-4).then(|| (0.5 * (p - n) / curvature).clamp(-0.5, 0.5))
+        };
+        let get = |x: usize, y: usize| self.ncc[y * side + x];
+        let fx = refine(
+            bx.checked_sub(1).map(|x| get(x, by)),
+            (bx + 1 < side).then(|| get(bx + 1, by)),
+        )?;
+        let fy = refine(
+            by.checked_sub(1).map(|y| get(bx, y)),
+            (by + 1 < side).then(|| get(bx, by + 1)),
+        )?;
+        Some(EdgeShift {
+            du: bx as f32 - r as f32 + fx,
+            dv: by as f32 - r as f32 + fy,
+            peak_ncc: peak,
+            gain: peak - zero,
+            at_limit: bx == 0 || by == 0 || bx == side - 1 || by == side - 1,
+        })
     }
-    Some((1.0 - cov / (va.sqrt() * vb.sqrt())) as f32)
+
+    /// Gradient magnitudes (central differences) of the luma (`/255`) and of the warped
+    /// amplitude, and where both are defined: the pixel and its 4 neighbours have valid depth.
+    fn gradients(
+        &mut self,
+        rgb: ArrayView3<u8>,
+        warped_amplitude: ArrayView2<f32>,
+        warped_depth: ArrayView2<f32>,
+    ) {
+        let (h, w) = warped_depth.dim();
+        let n = h * w;
+        for buffer in [&mut self.luma_gradient, &mut self.amplitude_gradient] {
+            buffer.clear();
+            buffer.resize(n, 0.0);
+        }
+        self.valid.clear();
+        self.valid.resize(n, false);
+        let luma = |y: usize, x: usize| {
+            (0.299 * f32::from(rgb[[y, x, 0]])
+                + 0.587 * f32::from(rgb[[y, x, 1]])
+                + 0.114 * f32::from(rgb[[y, x, 2]]))
+                / 255.0
+        };
+        for y in 1..h - 1 {
+            for x in 1..w - 1 {
+                let ok = [(y, x), (y - 1, x), (y + 1, x), (y, x - 1), (y, x + 1)]
+                    .iter()
+                    .all(|&p| is_valid_depth(warped_depth[p]));
+                if !ok {
+                    continue;
+                }
+                let a = |yy: usize, xx: usize| warped_amplitude[[yy, xx]];
+                let ga = (a(y, x + 1) - a(y, x - 1)).hypot(a(y + 1, x) - a(y - 1, x));
+                if !ga.is_finite() {
+                    continue;
+                }
+                let i = y * w + x;
+                self.amplitude_gradient[i] = ga;
+                self.luma_gradient[i] =
+                    (luma(y, x + 1) - luma(y, x - 1)).hypot(luma(y + 1, x) - luma(y - 1, x));
+                self.valid[i] = true;
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -76,26 +261,93 @@ mod tests {
     use super::*;
     use ndarray::{Array2, Array3};
 
-    fn texture(y: usize, x: usize, shift: usize) -> f32 {
-        let xs = x + shift;
-        (((xs / 5) + (y / 7)) % 2) as f32 * 0.6 + 0.2 * ((xs * 3 + y) % 11) as f32 / 10.0
+    /// A blocky texture with some fine structure, sampled at `x + sx`, `y + sy`.
+    fn texture(y: f32, x: f32) -> f32 {
+        let (xi, yi) = (x.floor() as i64, y.floor() as i64);
+        let block = ((xi.div_euclid(5) + yi.div_euclid(7)) % 2) as f32 * 0.6;
+        block + 0.2 * ((xi * 3 + yi).rem_euclid(11)) as f32 / 10.0
+    }
+
+    fn scene(h: usize, w: usize, sx: f32, sy: f32) -> (Array3<u8>, Array2<f32>) {
+        let rgb = Array3::from_shape_fn((h, w, 3), |(y, x, _)| {
+            (texture(y as f32, x as f32) * 255.0) as u8
+        });
+        // The warped amplitude sees the RGB pixel p at p + (sx, sy).
+        let amplitude =
+            Array2::from_shape_fn((h, w), |(y, x)| texture(y as f32 - sy, x as f32 - sx));
+        (rgb, amplitude)
     }
 
     #[test]
     fn aligned_edges_agree_and_shifted_ones_do_not() {
         let (h, w) = (60, 80);
-        let rgb = Array3::from_shape_fn((h, w, 3), |(y, x, _)| (texture(y, x, 0) * 255.0) as u8);
         let depth = Array2::from_elem((h, w), 2.0f32);
-        let aligned = Array2::from_shape_fn((h, w), |(y, x)| texture(y, x, 0));
-        let shifted = Array2::from_shape_fn((h, w), |(y, x)| texture(y, x, 3));
-        let good = edge_disagreement(rgb.view(), aligned.view(), depth.view()).unwrap();
-        let bad = edge_disagreement(rgb.view(), shifted.view(), depth.view()).unwrap();
-        assert!(good < 0.05, "aligned: {good}");
-        assert!(bad > good + 0.3, "aligned {good}, shifted {bad}");
+        let mut check = EdgeCheck::new(0);
+        let (rgb, aligned) = scene(h, w, 0.0, 0.0);
+        let (_, shifted) = scene(h, w, 3.0, 0.0);
+        let good = check
+            .measure(rgb.view(), aligned.view(), depth.view())
+            .unwrap();
+        let bad = check
+            .measure(rgb.view(), shifted.view(), depth.view())
+            .unwrap();
+        assert!(good.disagreement < 0.05, "aligned: {good:?}");
+        assert!(
+            bad.disagreement > good.disagreement + 0.3,
+            "aligned {good:?}, shifted {bad:?}"
+        );
+        assert_eq!(good.shift, None, "no search window, no shift");
         // No valid depth: no signal.
         let none = Array2::zeros((h, w));
+        assert_eq!(check.measure(rgb.view(), aligned.view(), none.view()), None);
+    }
+
+    #[test]
+    fn the_edge_shift_is_the_principal_point_correction() {
+        let (h, w) = (90, 120);
+        let depth = Array2::from_elem((h, w), 2.0f32);
+        let mut check = EdgeCheck::new(3);
+        for (sx, sy) in [(0.0, 0.0), (2.0, -1.0), (-3.0, 2.0), (1.0, 3.0)] {
+            let (rgb, amplitude) = scene(h, w, sx, sy);
+            let m = check
+                .measure(rgb.view(), amplitude.view(), depth.view())
+                .unwrap();
+            let s = m.shift.expect("a clear peak");
+            // The amplitude edge of RGB pixel p is at p + (sx, sy): c must grow by that.
+            assert!(
+                (s.du - sx).abs() < 0.35 && (s.dv - sy).abs() < 0.35,
+                "shift ({sx}, {sy}) measured {s:?}"
+            );
+            assert!(s.gain >= 0.0);
+            assert_eq!(s.at_limit, sx.abs() >= 3.0 || sy.abs() >= 3.0);
+        }
+    }
+
+    #[test]
+    fn a_shift_beyond_the_window_is_flagged() {
+        // One bright rectangle (no repeating texture to alias with), seen 5 px to the right.
+        let (h, w) = (90, 120);
+        let rect = |y: f32, x: f32| f32::from((30.0..70.0).contains(&x) && (25.0..60.0).contains(&y));
+        let rgb = Array3::from_shape_fn((h, w, 3), |(y, x, _)| {
+            (rect(y as f32, x as f32) * 200.0) as u8
+        });
+        let amplitude = Array2::from_shape_fn((h, w), |(y, x)| rect(y as f32, x as f32 - 5.0));
+        let depth = Array2::from_elem((h, w), 2.0f32);
+        let s = EdgeCheck::new(2)
+            .measure(rgb.view(), amplitude.view(), depth.view())
+            .unwrap()
+            .shift
+            .expect("a peak");
+        assert!(s.at_limit && s.du == 2.0, "{s:?}");
+        assert!(s.dv.abs() < 0.35, "{s:?}");
+    }
+
+    #[test]
+    fn wrong_shapes_give_none() {
+        let (rgb, amplitude) = scene(30, 40, 0.0, 0.0);
+        let depth = Array2::from_elem((30, 41), 2.0f32);
         assert_eq!(
-            edge_disagreement(rgb.view(), aligned.view(), none.view()),
+            EdgeCheck::new(2).measure(rgb.view(), amplitude.view(), depth.view()),
             None
         );
     }

@@ -60,6 +60,10 @@ pub struct EvalArgs {
     /// `online_interval_frames`).
     #[arg(long, default_value_t = OnlineConfig::default().interval_frames)]
     pub online_interval: u32,
+    /// Online mode: fraction of the edge check's principal-point correction applied per frame
+    /// between network runs (the daemon's `online_track_gain`; 0 turns tracking off).
+    #[arg(long, default_value_t = OnlineConfig::default().track_gain)]
+    pub online_track_gain: f32,
 }
 
 /// What `eval.json` holds.
@@ -127,6 +131,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     }
     let online_config = OnlineConfig {
         interval_frames: args.online_interval,
+        track_gain: args.online_track_gain,
         ..OnlineConfig::default()
     };
     let mut online: Vec<(OnlineCalibrator, usize)> = bundles
