@@ -10,6 +10,7 @@ use dear_pipeline::align::StaticAligner;
 use dear_pipeline::dear::{
     CachedFusion, ChainError, ChainInput, ChainMode, ChainOptions, ChainOutput, DearChain,
 };
+use dear_pipeline::geometry::warp_depth;
 use dear_pipeline::model::ModelBundle;
 use dear_pipeline::{Calibration, Flow};
 use ndarray::{s, Array2, Array3, ArrayView2, Axis};
@@ -251,7 +252,7 @@ fn each_network_matches_pytorch_on_pytorch_inputs() {
 }
 
 #[test]
-fn cached_mode_skips_the_flow_network_and_aligns_like_the_static_aligner() {
+fn cached_mode_skips_the_flow_network_and_warps_with_the_calibration_flow() {
     let p = Parity::load();
     let calib = p.calibration;
     let mut chain = DearChain::new(&bundle(), p.w, p.h).unwrap();
@@ -262,11 +263,15 @@ fn cached_mode_skips_the_flow_network_and_aligns_like_the_static_aligner() {
     assert_eq!(report.calibration, Some(calib));
     assert_eq!(report.timings.flow, std::time::Duration::ZERO);
 
+    // The flow is the calibration's flow at the splatted depth (the static aligner's); the
+    // refiner's input is the ToF depth warped with it like in `Full` mode (and in training).
     let mut aligner = StaticAligner::new(p.h, p.w);
-    let mut want = Array2::zeros((p.h, p.w));
-    aligner.align_into(p.plane("tof_depth", 0), &calib, want.view_mut());
-    assert_eq!(chain.depth_warped(), &want);
+    let mut splat = Array2::zeros((p.h, p.w));
+    aligner.align_into(p.plane("tof_depth", 0), &calib, splat.view_mut());
     assert_eq!(chain.flow_refined(), aligner.flow());
+    let mut want = Array2::zeros((p.h, p.w));
+    warp_depth(p.plane("tof_depth", 0), aligner.flow(), want.view_mut());
+    assert_eq!(chain.depth_warped(), &want);
     for ((y, x), &z) in want.indexed_iter() {
         if z > 0.0 {
             assert!(out.depth[[y, x]] > 0.0);

@@ -136,7 +136,10 @@ impl EdgeCheck {
         self.gradients(rgb, warped_amplitude, warped_depth);
 
         // Sample pixels at least r + 1 from the border so every shifted index is inside.
-        let stride = ((h * w) as f64 / TARGET_SAMPLES as f64).sqrt().round().max(2.0) as usize;
+        let stride = ((h * w) as f64 / TARGET_SAMPLES as f64)
+            .sqrt()
+            .round()
+            .max(2.0) as usize;
         self.samples.clear();
         for y in (r + 1..h - r - 1).step_by(stride) {
             for x in (r + 1..w - r - 1).step_by(stride) {
@@ -327,7 +330,8 @@ mod tests {
     fn a_shift_beyond_the_window_is_flagged() {
         // One bright rectangle (no repeating texture to alias with), seen 5 px to the right.
         let (h, w) = (90, 120);
-        let rect = |y: f32, x: f32| f32::from((30.0..70.0).contains(&x) && (25.0..60.0).contains(&y));
+        let rect =
+            |y: f32, x: f32| f32::from((30.0..70.0).contains(&x) && (25.0..60.0).contains(&y));
         let rgb = Array3::from_shape_fn((h, w, 3), |(y, x, _)| {
             (rect(y as f32, x as f32) * 200.0) as u8
         });
