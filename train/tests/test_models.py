@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 import torch
+import torch.nn.functional as F
 
 from dear_train.models import (
     VARIANTS,
@@ -14,7 +15,7 @@ from dear_train.models import (
 )
 from dear_train.models.complexity import measure
 from dear_train.models.dear import DEAR
-from dear_train.models.layers import Correlation
+from dear_train.models.layers import Correlation, resize_like
 
 H, W = 48, 64
 
@@ -137,3 +138,17 @@ def test_edge_tier_is_50x_cheaper() -> None:
     paper = sum(c.macs for c in measure("paper", height=96, width=128))
     edge = sum(c.macs for c in measure("edge", height=96, width=128))
     assert paper / edge >= 50, paper / edge
+
+
+@pytest.mark.parametrize("scale", [2, 4, 64])
+@pytest.mark.parametrize("size", [(5, 7), (1, 3), (12, 16)])
+def test_resize_like_is_bilinear_interpolation(scale: int, size: tuple[int, int]) -> None:
+    h, w = size
+    x = torch.randn(2, 3, h, w)
+    ref = torch.zeros(1, 1, h * scale - 1, w * scale - 2)
+    want = F.interpolate(x, scale_factor=float(scale), mode="bilinear", align_corners=False)
+    got = resize_like(x, ref, scale)
+    assert got.shape == (2, 3, h * scale - 1, w * scale - 2)
+    assert torch.allclose(got, want[:, :, : h * scale - 1, : w * scale - 2], atol=1e-6)
+    with pytest.raises(ValueError, match="even"):
+        resize_like(x, ref, 3)
