@@ -19,6 +19,11 @@ use dear_pipeline::model::{ModelBundle, RunnerOptions};
 use dear_pipeline::{Calibration, Flow};
 use ndarray::{Array2, Array3};
 
+// The daemon's allocator (see deard's main.rs: with glibc's malloc, tract's large intermediate
+// tensors come back as fresh page faults on every run).
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 const H: usize = 480;
 const W: usize = 640;
 
