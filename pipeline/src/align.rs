@@ -14,13 +14,14 @@ use ndarray::{ArrayView2, ArrayViewMut2, Zip};
 
 use crate::calibration::Calibration;
 use crate::frame::Flow;
-use crate::geometry::{flow_from_depth_into, splat_depth_into};
+use crate::geometry::{flow_from_depth_into, splat_depth_with, SplatScratch};
 
 /// Aligns depth with a given calibration; keeps the flow of the last frame for warping other
 /// ToF images (amplitude) the same way.
 #[derive(Debug, Clone)]
 pub struct StaticAligner {
     flow: Flow,
+    splat: SplatScratch,
 }
 
 impl StaticAligner {
@@ -28,6 +29,7 @@ impl StaticAligner {
     pub fn new(height: usize, width: usize) -> Self {
         StaticAligner {
             flow: Flow::zeros(height, width),
+            splat: SplatScratch::default(),
         }
     }
 
@@ -49,7 +51,7 @@ impl StaticAligner {
             self.flow.u.dim(),
             "align_into: depth shape differs from the aligner's"
         );
-        splat_depth_into(tof_depth, calib, out.view_mut());
+        splat_depth_with(tof_depth, calib, out.view_mut(), &mut self.splat);
         flow_from_depth_into(
             out.view(),
             calib,

@@ -214,7 +214,9 @@ fn solve_moments(m: &Moments) -> Result<Calibration, LsqError> {
 #[inline]
 fn residual(c: &Calibration, z: f32, u: f32, v: f32) -> f32 {
     let (pu, pv) = c.flow_at(z).unwrap_or((0.0, 0.0));
-    (u - pu).hypot(v - pv)
+    // sqrt, not hypot (per pixel and iteration; flows are far from overflowing).
+    let (du, dv) = (u - pu, v - pv);
+    (du * du + dv * dv).sqrt()
 }
 
 /// Weighted RMS end-point residual with the caller's weights.

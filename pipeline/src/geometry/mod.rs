@@ -26,5 +26,7 @@ pub use flow::{flow_from_depth, flow_from_depth_into};
 pub use lsq::{
     solve_calibration, solve_calibration_robust, CalibrationFit, LsqError, RobustOptions,
 };
-pub use splat::{splat_depth_into, synthesize_view, SynthesizedView};
+pub use splat::{
+    splat_depth_into, splat_depth_with, synthesize_view, SplatScratch, SynthesizedView,
+};
 pub use warp::{warp_bilinear, warp_depth, warp_rgb};

@@ -22,7 +22,7 @@
 //! shift accurately. The returned flow is recomputed from the output depth, so at valid pixels
 //! it is exactly `P.flow_at(depth)`.
 
-use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayViewMut2, Zip};
+use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayViewMut2};
 
 use crate::calibration::Calibration;
 use crate::frame::Flow;
@@ -78,72 +78,81 @@ fn splat_taps(tx: f32, ty: f32, h: usize, w: usize) -> impl Iterator<Item = ((us
 }
 
 /// Passes 1 and 2 of the module's method: the accumulated bilinear weight, weighted depth
-/// and (when `rgb` is given) weighted colour of the front surface at every target pixel.
-struct FrontSurface {
-    weight: Array2<f32>,
+/// and (when colour is splatted) weighted colour of the front surface at every target pixel,
+/// as flat row-major buffers. Kept between calls by [`SplatScratch`] users: the daemon splats
+/// every frame, and fresh 640×480 buffers cost page faults each time.
+#[derive(Debug, Clone, Default)]
+pub struct SplatScratch {
+    zbuf: Vec<f32>,
+    weight: Vec<f32>,
     /// Weight of every surface that landed, front or not.
-    any_weight: Array2<f32>,
-    depth_sum: Array2<f32>,
-    colour_sum: Option<Array3<f32>>,
+    any_weight: Vec<f32>,
+    depth_sum: Vec<f32>,
 }
 
-fn splat_front(
-    depth: ArrayView2<f32>,
-    perturbation: &Calibration,
-    rgb: Option<ArrayView3<u8>>,
-) -> FrontSurface {
-    let (h, w) = depth.dim();
-    // Landing points of the valid sources, computed once: (source y, x, landing x, y, depth).
-    // The passes index flat buffers: the daemon runs this on every frame, and the tests run
-    // the daemon unoptimised, where 2-D ndarray indexing costs several times more.
-    let sources: Vec<(usize, usize, f32, f32, f32)> = depth
-        .indexed_iter()
-        .filter_map(|((y, x), &z)| {
-            if !is_valid_depth(z) {
-                return None;
-            }
-            let (fu, fv) = perturbation.flow_at(z)?;
-            Some((y, x, x as f32 - fu, y as f32 - fv, z))
-        })
-        .collect();
+/// Where source pixel `(y, x)` of depth `z` lands in the target view, if it is a valid source.
+#[inline]
+fn landing(perturbation: &Calibration, y: usize, x: usize, z: f32) -> Option<(f32, f32)> {
+    if !is_valid_depth(z) {
+        return None;
+    }
+    let (fu, fv) = perturbation.flow_at(z)?;
+    Some((x as f32 - fu, y as f32 - fv))
+}
 
-    // Pass 1: z-buffer.
-    let mut zbuf = vec![f32::INFINITY; h * w];
-    for &(_, _, tx, ty, z) in &sources {
-        for ((ty, tx), _) in splat_taps(tx, ty, h, w) {
-            let t = ty * w + tx;
-            if z < zbuf[t] {
-                zbuf[t] = z;
+impl SplatScratch {
+    /// Runs passes 1 and 2 over `depth`; `colour_sum` (`(H, W, C)`) also accumulates `rgb`.
+    /// The passes index flat buffers: the tests run the daemon unoptimised, where 2-D ndarray
+    /// indexing costs several times more. Landing points are recomputed in pass 2 rather than
+    /// stored (one division per pixel is cheaper than a 6 MB list at VGA).
+    fn splat_front(
+        &mut self,
+        depth: ArrayView2<f32>,
+        perturbation: &Calibration,
+        mut colour: Option<(ArrayView3<u8>, &mut Array3<f32>)>,
+    ) {
+        let (h, w) = depth.dim();
+        let reset = |v: &mut Vec<f32>, fill: f32| {
+            v.clear();
+            v.resize(h * w, fill);
+        };
+        reset(&mut self.zbuf, f32::INFINITY);
+        reset(&mut self.weight, 0.0);
+        reset(&mut self.any_weight, 0.0);
+        reset(&mut self.depth_sum, 0.0);
+
+        // Pass 1: z-buffer.
+        for ((y, x), &z) in depth.indexed_iter() {
+            let Some((tx, ty)) = landing(perturbation, y, x, z) else {
+                continue;
+            };
+            for ((ty, tx), _) in splat_taps(tx, ty, h, w) {
+                let t = ty * w + tx;
+                if z < self.zbuf[t] {
+                    self.zbuf[t] = z;
+                }
             }
         }
-    }
 
-    // Pass 2: accumulate the front surface.
-    let mut weight = vec![0.0f32; h * w];
-    let mut any_weight = vec![0.0f32; h * w];
-    let mut depth_sum = vec![0.0f32; h * w];
-    let mut colour_sum = rgb.map(|rgb| Array3::zeros((h, w, rgb.dim().2)));
-    for &(sy, sx, tx, ty, z) in &sources {
-        for ((ty, tx), wt) in splat_taps(tx, ty, h, w) {
-            let t = ty * w + tx;
-            any_weight[t] += wt;
-            if same_surface(zbuf[t], z) {
-                weight[t] += wt;
-                depth_sum[t] += wt * z;
-                if let (Some(csum), Some(rgb)) = (&mut colour_sum, &rgb) {
-                    for ch in 0..rgb.dim().2 {
-                        csum[(ty, tx, ch)] += wt * f32::from(rgb[(sy, sx, ch)]);
+        // Pass 2: accumulate the front surface.
+        for ((sy, sx), &z) in depth.indexed_iter() {
+            let Some((tx, ty)) = landing(perturbation, sy, sx, z) else {
+                continue;
+            };
+            for ((ty, tx), wt) in splat_taps(tx, ty, h, w) {
+                let t = ty * w + tx;
+                self.any_weight[t] += wt;
+                if same_surface(self.zbuf[t], z) {
+                    self.weight[t] += wt;
+                    self.depth_sum[t] += wt * z;
+                    if let Some((rgb, csum)) = colour.as_mut() {
+                        for ch in 0..rgb.dim().2 {
+                            csum[(ty, tx, ch)] += wt * f32::from(rgb[(sy, sx, ch)]);
+                        }
                     }
                 }
             }
         }
-    }
-    let grid = |v: Vec<f32>| Array2::from_shape_vec((h, w), v).expect("h·w values");
-    FrontSurface {
-        weight: grid(weight),
-        any_weight: grid(any_weight),
-        depth_sum: grid(depth_sum),
-        colour_sum,
     }
 }
 
@@ -166,22 +175,38 @@ fn splat_front(
 pub fn splat_depth_into(
     depth: ArrayView2<f32>,
     perturbation: &Calibration,
+    out: ArrayViewMut2<f32>,
+) {
+    splat_depth_with(depth, perturbation, out, &mut SplatScratch::default());
+}
+
+/// [`splat_depth_into`] with buffers kept in `scratch` between calls.
+///
+/// # Panics
+/// If `out`'s shape differs from `depth`'s.
+pub fn splat_depth_with(
+    depth: ArrayView2<f32>,
+    perturbation: &Calibration,
     mut out: ArrayViewMut2<f32>,
+    scratch: &mut SplatScratch,
 ) {
     assert_eq!(out.dim(), depth.dim(), "splat_depth_into: shapes differ");
-    let front = splat_front(depth, perturbation, None);
-    Zip::from(&mut out)
-        .and(&front.weight)
-        .and(&front.any_weight)
-        .and(&front.depth_sum)
-        .for_each(|o, &ws, &any, &zs| {
-            let z = zs / ws.max(f32::MIN_POSITIVE);
-            *o = if ws > 0.0 && any >= SPLAT_MIN_COVERAGE && perturbation.flow_at(z).is_some() {
-                z
-            } else {
-                0.0
-            };
-        });
+    scratch.splat_front(depth, perturbation, None);
+    let (_, w) = depth.dim();
+    for ((y, x), o) in out.indexed_iter_mut() {
+        let t = y * w + x;
+        let (ws, any, zs) = (
+            scratch.weight[t],
+            scratch.any_weight[t],
+            scratch.depth_sum[t],
+        );
+        let z = zs / ws.max(f32::MIN_POSITIVE);
+        *o = if ws > 0.0 && any >= SPLAT_MIN_COVERAGE && perturbation.flow_at(z).is_some() {
+            z
+        } else {
+            0.0
+        };
+    }
 }
 
 /// Forward-warp an aligned `(rgb, depth)` sample on the ToF grid into the RGB view that the
@@ -202,9 +227,10 @@ pub fn synthesize_view(
         "synthesize_view: rgb is {rh}×{rw} but depth is {h}×{w}"
     );
 
-    let front = splat_front(depth, perturbation, Some(rgb));
-    let (wsum, zsum) = (&front.weight, &front.depth_sum);
-    let csum = front.colour_sum.expect("colour was splatted");
+    let mut scratch = SplatScratch::default();
+    let mut csum = Array3::zeros((h, w, c));
+    scratch.splat_front(depth, perturbation, Some((rgb, &mut csum)));
+    let (wsum, zsum) = (&scratch.weight, &scratch.depth_sum);
 
     // Pass 3: normalise and validate.
     let mut out = SynthesizedView {
@@ -213,13 +239,14 @@ pub fn synthesize_view(
         flow: Flow::zeros(h, w),
         valid: Array2::from_elem((h, w), false),
     };
-    Zip::indexed(wsum).for_each(|(y, x), &ws| {
+    for (t, &ws) in wsum.iter().enumerate() {
+        let (y, x) = (t / w, t % w);
         if ws < SPLAT_MIN_COVERAGE {
-            return;
+            continue;
         }
-        let z = zsum[(y, x)] / ws;
+        let z = zsum[t] / ws;
         let Some((fu, fv)) = perturbation.flow_at(z) else {
-            return;
+            continue;
         };
         out.depth[(y, x)] = z;
         out.flow.u[(y, x)] = fu;
@@ -228,7 +255,7 @@ pub fn synthesize_view(
         for ch in 0..c {
             out.rgb[(y, x, ch)] = (csum[(y, x, ch)] / ws + 0.5).floor().clamp(0.0, 255.0) as u8;
         }
-    });
+    }
     out
 }
 

@@ -279,7 +279,8 @@ impl OnlineCalibrator {
             return;
         };
         if self.config.track_gain <= 0.0
-            || !(shift.peak_ncc >= self.config.track_min_ncc)
+            || shift.peak_ncc.is_nan()
+            || shift.peak_ncc < self.config.track_min_ncc
             || !(shift.du.is_finite() && shift.dv.is_finite())
         {
             return;

@@ -50,7 +50,7 @@ impl Measurement {
                 }
                 used += 1;
                 let (pu, pv) = (c.tx / z + c.cx, c.ty / z + c.cy);
-                let r = (u - pu).hypot(v - pv);
+                let r = ((u - pu) * (u - pu) + (v - pv) * (v - pv)).sqrt();
                 if r <= inlier_threshold_px {
                     inliers += 1;
                     sum2 += f64::from(r * r);

@@ -245,14 +245,19 @@ impl EdgeCheck {
                     continue;
                 }
                 let a = |yy: usize, xx: usize| warped_amplitude[[yy, xx]];
-                let ga = (a(y, x + 1) - a(y, x - 1)).hypot(a(y + 1, x) - a(y - 1, x));
+                // sqrt, not hypot: no overflow to guard against here, and hypot was 4 % of
+                // a VGA frame.
+                let magnitude = |gx: f32, gy: f32| (gx * gx + gy * gy).sqrt();
+                let ga = magnitude(a(y, x + 1) - a(y, x - 1), a(y + 1, x) - a(y - 1, x));
                 if !ga.is_finite() {
                     continue;
                 }
                 let i = y * w + x;
                 self.amplitude_gradient[i] = ga;
-                self.luma_gradient[i] =
-                    (luma(y, x + 1) - luma(y, x - 1)).hypot(luma(y + 1, x) - luma(y - 1, x));
+                self.luma_gradient[i] = magnitude(
+                    luma(y, x + 1) - luma(y, x - 1),
+                    luma(y + 1, x) - luma(y - 1, x),
+                );
                 self.valid[i] = true;
             }
         }
