@@ -122,7 +122,9 @@ def table_whole(report: dict[str, Report]) -> list[str]:
     return lines
 
 
-def table_tracking(report: dict[str, Report]) -> list[str]:
+def table_tracking(
+    report: dict[str, Report], untracked: dict[str, Report] | None = None
+) -> list[str]:
     lines = [
         "| Calibration | AEPE (px) | MAE all (cm) | flow network on | ms / frame |",
         "|---|---:|---:|---:|---:|",
@@ -142,8 +144,18 @@ def table_tracking(report: dict[str, Report]) -> list[str]:
                 f"{network.get(b, '?')} / {frames}",
             ),
         ]
-    for label, method, runs in rows:
-        r = report.get(method)
+    picked = [(label, report.get(method), runs) for label, method, runs in rows]
+    if untracked is not None:
+        network_u = dict(untracked["__file__"].get("online_network_frames", []))
+        for b in bundles(untracked):
+            picked.append(
+                (
+                    f"(b′) `{b}`: online filter without edge tracking",
+                    untracked.get(f"{b} online"),
+                    f"{network_u.get(b, '?')} / {frames}",
+                )
+            )
+    for label, r, runs in picked:
         if r is None:
             continue
         lines.append(
@@ -169,9 +181,9 @@ def table_latency(criterion: Path, onnxruntime: Path, interval: int) -> list[str
     lines = [
         (
             "| What | tract median (ms) | tract p95 (ms) | onnxruntime 1 thread (ms) | "
-            "onnxruntime 2 threads (ms) |"
+            "onnxruntime 2 threads (ms) | tract / onnxruntime, 1 thread |"
         ),
-        "|---|---:|---:|---:|---:|",
+        "|---|---:|---:|---:|---:|---:|",
     ]
     ort: dict[tuple[str, int], float] = {}
     if onnxruntime.is_file():
@@ -193,14 +205,44 @@ def table_latency(criterion: Path, onnxruntime: Path, interval: int) -> list[str
         o1, o2 = (ort.get((graph, k)) if graph else None for k in (1, 2))
         cells = [f"{1e3 * t[0]:.1f}", f"{1e3 * t[1]:.1f}"]
         cells += ["–" if o is None else f"{1e3 * o:.1f}" for o in (o1, o2)]
+        cells.append("–" if o1 is None else f"{t[0] / o1:.2f}×")
         lines.append(f"| {label} | " + " | ".join(cells) + " |")
     if "frame_full" in times and "frame_cached_skip" in times:
         full, cached = times["frame_full"][0], times["frame_cached_skip"][0]
         mean = ((interval - 1) * cached + full) / interval
         lines.append(
             f"| frame, online with the network every {interval} frames (mean) | "
-            f"{1e3 * mean:.1f} | – | – | – |"
+            f"{1e3 * mean:.1f} | – | – | – | – |"
         )
+    return lines
+
+
+def table_daemon(benches: list[Path]) -> list[str]:
+    """Rows of `deard-bench --json` files: per-frame latency of the daemon's processing."""
+    lines = [
+        (
+            "| Frame size | Calibration | frames with the flow network | median (ms) | "
+            "p95 (ms) | mean (ms) | stage medians (ms) |"
+        ),
+        "|---|---|---:|---:|---:|---:|---|",
+    ]
+    for path in benches:
+        if not path.is_file():
+            continue
+        bench = json.loads(path.read_text())
+        size = f"{bench['width']}×{bench['height']}"
+        for m in bench["modes"]:
+            runs = m["with_network"]["count"] if m["with_network"] else 0
+            stages = ", ".join(f"{k} {v:.1f}" for k, v in m["stage_median_ms"] if v > 0)
+            rows = [("all frames", m["all"])]
+            if m["mode"] == "online" and m["without_network"]:
+                rows.insert(0, ("steady state (no network)", m["without_network"]))
+            for what, t in rows:
+                lines.append(
+                    f"| {size} | {m['mode']}, {what} | {runs} / {m['all']['count']} | "
+                    f"{t['median_ms']:.1f} | {t['p95_ms']:.1f} | {t['mean_ms']:.1f} | "
+                    f"{stages} |"
+                )
     return lines
 
 
@@ -281,6 +323,10 @@ def main() -> None:
     sets = {s: load(args.eval, f"sigma{s}") for s in SIGMAS}
     frames = aligned["__file__"]["frames_evaluated"]
     sequence = load(args.eval, "sequence")
+    untracked_path = args.eval / "sequence-untracked" / "eval.json"
+    untracked = (
+        load(args.eval, "sequence-untracked") if untracked_path.is_file() else None
+    )
 
     if args.figures.exists():
         shutil.rmtree(args.figures)
@@ -340,7 +386,7 @@ def main() -> None:
             "needs it)."
         ),
         "",
-        *table_tracking(sequence),
+        *table_tracking(sequence, untracked),
         "",
     ]
     doc += [
@@ -355,6 +401,23 @@ def main() -> None:
         "",
         *table_latency(
             Path("target/criterion/dear_chain_vga"), args.eval / "onnxruntime.json", 30
+        ),
+        "",
+        "## The daemon's per-frame latency",
+        "",
+        (
+            "`deard-bench` runs deard's own processing (`Processor`, default configuration, "
+            "mimalloc, tract on one thread) over a capture in order and times every frame; "
+            "640×480: a 60-frame drifting sequence (`dear-synth sequence --seed 5`), 320×240: "
+            "the tracking sequence above. Online mode's steady state is the frames between "
+            'rough-flow runs; "all frames" includes the network frames. Stage medians are '
+            'over the steady-state frames (online) or all frames (every-frame); "flow" '
+            "includes the calibration (least squares, or the splat with a known calibration), "
+            '"refine" the confidence map and the edge check.'
+        ),
+        "",
+        *table_daemon(
+            [args.eval / "deard-bench-vga.json", args.eval / "deard-bench-qvga.json"]
         ),
         "",
     ]

@@ -3,17 +3,20 @@
 #   1. renders the test sets with dear-synth (80 aligned frames, seed 9001, 320×240; then
 #      misaligned copies at the paper's σ = 2, 4, 6 px of a 640×480 image, i.e. σ = 1, 2, 3 px
 #      at 320×240, seed 4) under $DEAR_DATA (default data/, ignored);
-#      and a 300-frame sequence with a drifting calibration (seed 77, 4 px peak drift);
+#      a 300-frame sequence with a drifting calibration (seed 77, 4 px peak drift), and a
+#      60-frame 640×480 sequence (seed 5) for the daemon's latency;
 #   2. runs `dear eval` on each set: ToF input, the classical baselines and every bundle under
-#      models/ (the same pipeline code the daemon runs);
+#      models/ (the same pipeline code the daemon runs); on the sequence also the online mode,
+#      with and without edge tracking;
+#   3. times the chain at 640×480 (criterion), the same graphs in onnxruntime, and the
+#      daemon's processing per frame (deard-bench, 640×480 and 320×240);
 #   4. assembles the tables, the paper comparison and the figures into RESULTS.md
 #      (scripts/results.py).
-#   3. times the chain at 640×480 (criterion) and the same graphs in onnxruntime;
-# About 15 minutes on the 2-core development machine once the binaries are built.
+# About 25 minutes on the 2-core development machine once the binaries are built.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
-cargo build --release --quiet -p dear-synth -p dear-client
+cargo build --release --quiet -p dear-synth -p dear-client -p deard
 
 data=${DEAR_DATA:-data}/results
 out=out/results
@@ -36,6 +39,10 @@ if [ ! -f "$data/sequence/capture.json" ]; then
     target/release/dear-synth sequence --frames 300 --drift-px 4 --seed 77 --width 320 \
         --height 240 --out "$data/sequence"
 fi
+if [ ! -f "$data/vga_sequence/capture.json" ]; then
+    target/release/dear-synth sequence --frames 60 --seed 5 --width 640 --height 480 \
+        --out "$data/vga_sequence"
+fi
 
 bundles=()
 for b in models/*/; do
@@ -52,10 +59,17 @@ done
 echo "== dear eval --online on the drifting sequence"
 target/release/dear eval --capture "$data/sequence" --baselines "${bundles[@]}" --online \
     --figures 0 --out "$out/sequence" > /dev/null
+target/release/dear eval --capture "$data/sequence" "${bundles[@]}" --online \
+    --online-track-gain 0 --figures 0 --out "$out/sequence-untracked" > /dev/null
 echo "== latency at 640×480: criterion (tract, one thread) and onnxruntime on the same graphs"
 rm -rf target/criterion/dear_chain_vga
 cargo bench --quiet -p dear-pipeline --bench dear_chain -- --warm-up-time 2 \
     --measurement-time 10 > "$out/bench.log"
 .venv/bin/dear-bench-onnx --bundle models/edge --json "$out/onnxruntime.json" > /dev/null
+echo "== the daemon's processing per frame (deard-bench)"
+target/release/deard-bench --capture "$data/vga_sequence" --frames 120 \
+    --json "$out/deard-bench-vga.json" > /dev/null
+target/release/deard-bench --capture "$data/sequence" --frames 200 \
+    --json "$out/deard-bench-qvga.json" > /dev/null
 .venv/bin/python scripts/results.py --eval "$out" --out RESULTS.md --figures results/figures
 echo "wrote RESULTS.md and results/figures/"
