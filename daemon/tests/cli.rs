@@ -58,6 +58,20 @@ fn unknown_keys_are_rejected_by_name() {
 }
 
 #[test]
+fn an_out_of_range_tracking_gain_is_rejected_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("deard.toml");
+    std::fs::write(&file, "[pipeline]\nonline_track_gain = 1.5\n").unwrap();
+    let out = deard(&["--config", file.to_str().unwrap(), "--print-config"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("online_track_gain = 1.5") && err.contains("0..=1"),
+        "{err}"
+    );
+}
+
+#[test]
 fn the_example_config_is_the_default_config() {
     let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/deard.example.toml"))
         .unwrap();

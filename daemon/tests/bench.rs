@@ -1,0 +1,83 @@
+//! `deard-bench` runs the daemon's processing over a real capture and reports what it claims:
+//! every measured frame counted once, split by whether the flow network ran, stage medians and
+//! resident memory, in its JSON as in its text.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+#[test]
+fn deard_bench_reports_every_measured_frame() {
+    let tmp = tempfile::tempdir().unwrap();
+    let json = tmp.path().join("bench.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_deard-bench"))
+        .current_dir(root())
+        .args([
+            "--capture",
+            "samples/demo",
+            "--bundle",
+            "fixtures/bundles/smoke-edge",
+            "--frames",
+            "5",
+            "--warmup",
+            "1",
+            "--mode",
+            "online",
+            "--mode",
+            "every-frame",
+            "--json",
+        ])
+        .arg(&json)
+        .output()
+        .expect("run deard-bench");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("online:") && stdout.contains("every-frame:"),
+        "{stdout}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(
+        (report["width"].as_u64(), report["height"].as_u64()),
+        (Some(320), Some(240))
+    );
+    let modes = report["modes"].as_array().unwrap();
+    assert_eq!(modes.len(), 2);
+    for m in modes {
+        let count = |k: &str| m[k]["count"].as_u64().unwrap_or(0);
+        assert_eq!(m["all"]["count"].as_u64(), Some(5), "{m}");
+        assert_eq!(count("with_network") + count("without_network"), 5, "{m}");
+        assert!(m["all"]["median_ms"].as_f64().unwrap() > 0.0);
+        assert!(m["rss_end_mib"].as_f64().unwrap() > 1.0);
+        let stages = m["stage_median_ms"].as_array().unwrap();
+        assert!(
+            stages
+                .iter()
+                .any(|s| s[0] == "refine" && s[1].as_f64().unwrap() > 0.0),
+            "{m}"
+        );
+    }
+    // The paper's mode runs the network on every frame; the online mode warms up on it (its
+    // first frames) and then uses it at most on a few.
+    assert_eq!(modes[1]["with_network"]["count"].as_u64(), Some(5));
+    assert_eq!(modes[0]["mode"], "online");
+}
+
+#[test]
+fn deard_bench_names_a_missing_capture() {
+    let out = Command::new(env!("CARGO_BIN_EXE_deard-bench"))
+        .args(["--capture", "/nonexistent/capture"])
+        .output()
+        .expect("run deard-bench");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("/nonexistent/capture"), "{err}");
+}
