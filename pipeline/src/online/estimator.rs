@@ -776,17 +776,23 @@ mod tests {
         })
     }
 
+    /// An estimator established on exact measurements of `TRUE`.
+    fn warmed_up(config: OnlineConfig) -> OnlineCalibrator {
+        let mut est = OnlineCalibrator::new(config);
+        for _ in 0..config.warmup_measurements {
+            est.begin_frame();
+            est.end_frame(Some(Ok(good(TRUE))), None);
+        }
+        est
+    }
+
     #[test]
     fn the_edge_shift_tracks_the_principal_point_between_network_frames() {
         let config = OnlineConfig {
             interval_frames: 1000,
             ..OnlineConfig::default()
         };
-        let mut est = OnlineCalibrator::new(config);
-        for _ in 0..config.warmup_measurements {
-            est.begin_frame();
-            est.end_frame(Some(Ok(good(TRUE))), None);
-        }
+        let mut est = warmed_up(config);
         // c_x wanders 0.3 px per frame; the edge check measures what is left over.
         let mut truth = TRUE;
         for _ in 0..40 {
@@ -817,14 +823,10 @@ mod tests {
         assert!((moved - config.track_max_step_px).abs() < 1e-5, "{moved}");
 
         // Tracking off: the estimate stays put.
-        let mut off = OnlineCalibrator::new(OnlineConfig {
+        let mut off = warmed_up(OnlineConfig {
             track_gain: 0.0,
             ..config
         });
-        for _ in 0..config.warmup_measurements {
-            off.begin_frame();
-            off.end_frame(Some(Ok(good(TRUE))), None);
-        }
         off.begin_frame();
         off.end_frame(None, shifted(1.0, 1.0, 0.5));
         assert_eq!(off.estimate(), Some(TRUE));
