@@ -130,8 +130,8 @@ pub struct StageTimings {
     pub warp: Duration,
     /// Refinement network, output masking and confidence.
     pub refine: Duration,
-    /// The alignment residual (zero when off).
-    pub residual: Duration,
+    /// The edge alignment check (zero when off).
+    pub alignment_check: Duration,
 }
 
 impl StageTimings {
@@ -143,7 +143,7 @@ impl StageTimings {
             + self.fuse
             + self.warp
             + self.refine
-            + self.residual
+            + self.alignment_check
     }
 }
 
@@ -430,7 +430,7 @@ impl DearChain {
                 self.amplitude_warped.view(),
                 self.depth_warped.view(),
             );
-            lap(&mut t.residual);
+            lap(&mut t.alignment_check);
             r
         } else {
             None
