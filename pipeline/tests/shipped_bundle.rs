@@ -11,6 +11,7 @@ use dear_pipeline::evaluate::{
     ground_truth_flow, ground_truth_mask, BundleMethod, Evaluation, Method, MethodRunner,
 };
 use dear_pipeline::model::ModelBundle;
+use dear_pipeline::online::{OnlineCalibrator, OnlineConfig};
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -53,4 +54,54 @@ fn the_shipped_edge_bundle_is_trained_and_improves_the_sample() {
          {mae_in:.2} cm in, {mae_out:.2} cm out"
     );
     assert!(edge.coverage > 0.95, "coverage {}", edge.coverage);
+}
+
+/// The daemon's online mode on the drifting sample: following the principal point with the
+/// edge check between network runs must align better than holding the last network estimate,
+/// and both better than the factory calibration (`dear eval --online` measures the same on the
+/// 300-frame sequence of `scripts/results.sh`).
+#[test]
+fn online_tracking_follows_the_drifting_sample() {
+    let bundle = ModelBundle::load(root().join("models/edge")).unwrap();
+    let capture = CaptureDir::open(root().join("samples/demo")).unwrap();
+    let (w, h) = capture.size();
+    let (w, h) = (w as usize, h as usize);
+    let mut classical = MethodRunner::new(h, w, capture.manifest().initial_calibration);
+    let mut eval = Evaluation::new();
+    let mut runs: Vec<(&str, BundleMethod, OnlineCalibrator)> = [("tracking", 0.7), ("held", 0.0)]
+        .into_iter()
+        .map(|(name, gain)| {
+            let config = OnlineConfig {
+                track_gain: gain,
+                ..OnlineConfig::default()
+            };
+            (
+                name,
+                BundleMethod::new(&bundle, name, h, w).unwrap(),
+                OnlineCalibrator::new(config),
+            )
+        })
+        .collect();
+    for position in 0..capture.len() {
+        let frame = capture.read_frame(position).unwrap();
+        let valid = ground_truth_mask(&frame).unwrap();
+        let truth = ground_truth_flow(&frame);
+        let fixed = classical.run(Method::StaticCalibration, &frame).unwrap();
+        eval.add("static", &frame, &fixed, valid.view(), truth.as_ref());
+        for (name, method, online) in &mut runs {
+            let (out, _) = method.run_online(&frame, online).unwrap();
+            eval.add(name, &frame, &out, valid.view(), truth.as_ref());
+        }
+    }
+    let aepe = |name: &str| {
+        let reports = eval.reports();
+        let r = reports.iter().find(|r| r.method == name).unwrap();
+        r.aepe_px.unwrap()
+    };
+    let (fixed, tracking, held) = (aepe("static"), aepe("tracking"), aepe("held"));
+    println!("AEPE over the sample: static {fixed:.2} px, held {held:.2}, tracking {tracking:.2}");
+    assert!(
+        tracking < 0.8 * held && tracking < 0.8 * fixed,
+        "static {fixed:.2} px, held estimate {held:.2} px, tracking {tracking:.2} px"
+    );
 }
