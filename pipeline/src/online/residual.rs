@@ -166,8 +166,8 @@ impl EdgeCheck {
                 self.ncc[dy * side + dx] = s.ncc().unwrap_or(f32::NAN);
             }
         }
-        let at = |dx: usize, dy: usize| self.ncc[dy * side + dx];
-        let zero = at(r, r);
+        // The window's centre is the zero shift.
+        let zero = self.ncc[r * side + r];
         if !zero.is_finite() {
             return None;
         }
