@@ -31,7 +31,7 @@ from torch import nn
 import dear_train
 from dear_train.data.dataset import normalize_amplitude
 from dear_train.data.synthetic import render_scene
-from dear_train.models import INPUT_SIZE_MULTIPLE, param_count
+from dear_train.models import INPUT_SIZE_MULTIPLE, kpn, param_count
 from dear_train.models.complexity import count_macs
 from dear_train.models.dear import DEAR
 from dear_train.models.flownetc import FlowNetC
@@ -41,7 +41,6 @@ from dear_train.training.checkpoint import load, load_model
 from dear_train.training.config import Profile
 
 FORMAT = "dear-model-bundle"
-FORMAT_VERSION = 1
 OPSET = 17
 #: Largest allowed |ONNX − PyTorch| on the check inputs (flows in px, depths in m).
 CHECK_ATOL = 1e-4
@@ -74,6 +73,12 @@ class RefineGraph(nn.Module):
 
     The ``/ max_depth`` and ``× max_depth`` around the network are part of the graph, so the
     daemon passes and receives metres and cannot get the depth scaling wrong.
+
+    For the ``gated`` variant (format version 2) the graph ends at the head: it outputs the 12
+    maps at 1/``stride`` resolution and the daemon upsamples and applies them
+    (``pipeline/src/model/kernel_apply.rs``, described by ``graphs.refine.apply``): tract runs
+    that full-resolution tail op by op at several times its arithmetic cost (its ``Softmax``
+    alone took ~0.8 s per 640×480 frame).
     """
 
     def __init__(self, net: RefineNet, max_depth: float) -> None:
@@ -84,7 +89,34 @@ class RefineGraph(nn.Module):
     def forward(
         self, amplitude: torch.Tensor, depth: torch.Tensor, rgb: torch.Tensor | None = None
     ) -> torch.Tensor:
+        if self.net.variant == "gated":
+            return self.net.gated_maps(amplitude, depth / self.max_depth, rgb)
         return self.net(amplitude, depth / self.max_depth, rgb) * self.max_depth
+
+
+def format_version(variant: str) -> int:
+    """Bundle format: 2 when the daemon applies the refiner's output (``gated``), else 1."""
+    return 2 if variant == "gated" else 1
+
+
+def refine_apply_spec(net: RefineNet) -> dict | None:
+    """``graphs.refine.apply``: what the daemon does with a format-2 refine graph's maps."""
+    if net.variant != "gated":
+        return None
+    return {
+        "kind": "gated-kernel",
+        "stride": net.backbone.stride,
+        "channels": kpn.GATED_CHANNELS,
+        "max_bias": kpn.GATED_MAX_BIAS,
+        "range_scale": kpn.GATED_RANGE_SCALE,
+        "definition": (
+            "maps upsampled bilinearly (half-pixel centres, edges clamped) to the depth grid "
+            "and cropped; d = depth / max_depth_m; for the 3x3 neighbours d_i (edges "
+            "replicated) w = softmax_i(maps[i] - range_scale * exp(maps[11]) * |d_i - d|) over "
+            "neighbours with d_i > 0; out = d + sigmoid(maps[10]) * (sum w_i d_i + max_bias * "
+            "tanh(maps[9]) - d), 0 where d = 0; metres = out * max_depth_m"
+        ),
+    }
 
 
 def _tensor_io(name: str, channels: int, meaning: str) -> dict:
@@ -154,7 +186,19 @@ def graph_specs(variant: str) -> dict[str, dict]:
         "refine": {
             "file": "refine.onnx",
             "inputs": refine_inputs,
-            "outputs": [_tensor_io("depth_refined", 1, "refined depth on the RGB grid, metres")],
+            "outputs": [
+                {
+                    **_tensor_io(
+                        "refine_maps",
+                        kpn.GATED_CHANNELS,
+                        "kernel logits (9), bias, gate and range log-sharpness at 1/stride "
+                        "resolution; applied by the daemon as graphs.refine.apply says",
+                    ),
+                    "shape": ["N", kpn.GATED_CHANNELS, "H/4", "W/4"],
+                }
+                if variant == "gated"
+                else _tensor_io("depth_refined", 1, "refined depth on the RGB grid, metres")
+            ],
         },
     }
 
@@ -185,7 +229,10 @@ def export_graph(module: nn.Module, inputs: tuple, spec: dict, path: Path) -> No
     """Export one graph (TorchScript exporter, opset 17, dynamic N/H/W, one file)."""
     names_in = [i["name"] for i in spec["inputs"]]
     names_out = [o["name"] for o in spec["outputs"]]
-    dyn = {n: {0: "N", 2: "H", 3: "W"} for n in names_in + names_out}
+    dyn = {n: {0: "N", 2: "H", 3: "W"} for n in names_in}
+    dyn |= {
+        o["name"]: {0: "N", 2: str(o["shape"][2]), 3: str(o["shape"][3])} for o in spec["outputs"]
+    }
     module.eval()
     with torch.no_grad():
         torch.onnx.export(
@@ -276,10 +323,12 @@ def export_bundle(
             )
         entry["bytes"] = path.stat().st_size
         entry["sha256"] = sha256(path)
+        if name == "refine" and (apply := refine_apply_spec(model.refine)) is not None:
+            entry["apply"] = apply
         graphs[name] = entry
     manifest = {
         "format": FORMAT,
-        "format_version": FORMAT_VERSION,
+        "format_version": format_version(profile.variant),
         "tier": profile.tier,
         "variant": profile.variant,
         "opset": OPSET,
@@ -307,6 +356,74 @@ def export_bundle(
     return manifest
 
 
+def export_refine_into(
+    model: DEAR,
+    profile: Profile,
+    bundle: Path,
+    extra: dict | None = None,
+    check: bool = True,
+    check_sizes: tuple[tuple[int, int], ...] = ((96, 128), (64, 80)),
+    macs_at: tuple[int, int] | None = (480, 640),
+) -> dict:
+    """Replace the refinement graph of the existing bundle ``bundle`` with ``model``'s.
+
+    For a refinement net trained on its own (a profile whose only stage is ``refine``): the
+    bundle keeps its flow and fusion graphs; ``refine.onnx``, its ``graphs.refine`` entry and
+    the top-level ``variant`` are replaced, and the run's recipe and metrics are recorded under
+    ``training.refine`` and ``validation.refine`` (the flow graphs' records stay as they were).
+    The normalisation must match the bundle's: the daemon applies one to every graph.
+    """
+    bundle = Path(bundle)
+    manifest_path = bundle / "model.json"
+    manifest = json.loads(manifest_path.read_text())
+    norm = profile.norm
+    have = manifest["normalisation"]
+    if (have["max_depth_m"], have["amplitude_percentile"]) != (
+        norm.max_depth,
+        norm.amplitude_percentile,
+    ):
+        raise ValueError(
+            f"{manifest_path}: normalisation {have} differs from the checkpoint's {norm}"
+        )
+    assert model.refine is not None
+    module = RefineGraph(model.refine, norm.max_depth).eval()
+    spec = graph_specs(profile.variant)["refine"]
+    sizes = [
+        check_inputs(profile.variant, norm.max_depth, norm.amplitude_percentile, h, w)["refine"]
+        for h, w in check_sizes
+    ]
+    path = bundle / spec["file"]
+    export_graph(module, sizes[0], spec, path)
+    entry = dict(spec)
+    if check:
+        entry["check"] = {
+            "runtime": "onnxruntime",
+            "sizes": [list(s) for s in check_sizes],
+            "max_abs_diff": max(verify_graph(module, x, path, spec) for x in sizes),
+            "tolerance": CHECK_ATOL,
+        }
+    entry["params"] = param_count(module)
+    if macs_at is not None:
+        zeros = _zeros_at(sizes[0], macs_at)
+        entry[f"gmac_at_{macs_at[1]}x{macs_at[0]}"] = round(
+            count_macs(module, lambda: module(*zeros)) / 1e9, 4
+        )
+    entry["bytes"] = path.stat().st_size
+    entry["sha256"] = sha256(path)
+    if (apply := refine_apply_spec(model.refine)) is not None:
+        entry["apply"] = apply
+    manifest["graphs"]["refine"] = entry
+    manifest["variant"] = profile.variant
+    manifest["format_version"] = format_version(profile.variant)
+    manifest.setdefault("training", {})["refine"] = {
+        "profile": profile.to_dict(),
+        **(extra or {}).get("training", {}),
+    }
+    manifest.setdefault("validation", {})["refine"] = (extra or {}).get("validation", {})
+    manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
+    return manifest
+
+
 def _zeros_at(inputs: tuple, size: tuple[int, int]) -> tuple:
     """Zero inputs with the channels of ``inputs`` at ``size`` (for the MAC count)."""
     return tuple(torch.zeros(x.shape[0], x.shape[1], *size) for x in inputs)
@@ -319,6 +436,11 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--checkpoint", type=Path, required=True, help="final.pt of a training run")
     p.add_argument("--out", type=Path, required=True, help="bundle directory to write")
     p.add_argument("--no-check", action="store_true", help="skip the onnxruntime comparison")
+    p.add_argument(
+        "--refine-only",
+        action="store_true",
+        help="replace only refine.onnx of the existing bundle --out (a refine-only training run)",
+    )
     a = p.parse_args(argv)
     model, profile = load_model(a.checkpoint)
     ckpt = load(a.checkpoint)
@@ -326,7 +448,10 @@ def main(argv: list[str] | None = None) -> None:
         "training": {"data": ckpt.get("data", []), "frames": ckpt.get("frames", {})},
         "validation": ckpt.get("metrics", {}),
     }
-    manifest = export_bundle(model, profile, a.out, extra, check=not a.no_check)
+    if a.refine_only:
+        manifest = export_refine_into(model, profile, a.out, extra, check=not a.no_check)
+    else:
+        manifest = export_bundle(model, profile, a.out, extra, check=not a.no_check)
     for _name, g in manifest["graphs"].items():
         chk = g.get("check", {}).get("max_abs_diff")
         print(

@@ -12,12 +12,12 @@ import onnxruntime as ort
 import pytest
 import torch
 
-from dear_train.export import export_bundle
+from dear_train.export import export_bundle, export_refine_into
 from dear_train.training.checkpoint import build_model
 from dear_train.training.config import get_profile
 
 
-@pytest.mark.parametrize("variant", ["kpn", "norgb"])
+@pytest.mark.parametrize("variant", ["kpn", "norgb", "gated"])
 def test_edge_bundle_round_trip(tmp_path: Path, variant: str) -> None:
     profile = get_profile("smoke", variant=variant)
     model = build_model(profile).eval()
@@ -31,7 +31,8 @@ def test_edge_bundle_round_trip(tmp_path: Path, variant: str) -> None:
     ]  # one file per graph: no external .onnx.data
     on_disk = json.loads((out / "model.json").read_text())
     assert on_disk == json.loads(json.dumps(manifest))
-    assert on_disk["format_version"] == 1 and on_disk["tier"] == "edge"
+    assert on_disk["format_version"] == (2 if variant == "gated" else 1)
+    assert on_disk["tier"] == "edge"
     assert on_disk["normalisation"]["max_depth_m"] == 10.0
     assert on_disk["validation"] == {"x": 1.0}
     for name, g in on_disk["graphs"].items():
@@ -56,6 +57,51 @@ def test_edge_bundle_round_trip(tmp_path: Path, variant: str) -> None:
     (got,) = sess.run(None, feed)
     with torch.no_grad():
         args = [torch.from_numpy(x) for x in (amp, depth / 10)]
-        want = model.refine(*args, torch.from_numpy(rgb) if with_rgb else None) * 10
+        rgb_t = torch.from_numpy(rgb) if with_rgb else None
+        if variant == "gated":
+            # Format 2: the graph outputs the head's maps at 1/4; the daemon applies them.
+            assert on_disk["graphs"]["refine"]["apply"]["kind"] == "gated-kernel"
+            assert on_disk["graphs"]["refine"]["apply"]["stride"] == 4
+            want = model.refine.gated_maps(*args, rgb_t)
+            assert got.shape == (1, 12, 10, 12)
+        else:
+            assert "apply" not in on_disk["graphs"]["refine"]
+            want = model.refine(*args, rgb_t) * 10
+            assert abs(float(np.median(got)) - float(np.median(depth))) < 0.2  # near-identity
     np.testing.assert_allclose(got, want.numpy(), atol=1e-4)
-    assert abs(float(np.median(got)) - float(np.median(depth))) < 0.2  # near-identity at init
+
+
+def test_refine_only_export_replaces_just_the_refiner(tmp_path: Path) -> None:
+    """A refine-only run goes into an existing bundle: flow graphs and their records stay."""
+    base = get_profile("smoke")
+    out = tmp_path / "bundle"
+    export_bundle(build_model(base).eval(), base, out, {"validation": {"aepe": 2.0}}, macs_at=None)
+    before = json.loads((out / "model.json").read_text())
+    flow_bytes = (out / "flow.onnx").read_bytes()
+
+    gated = get_profile("smoke", variant="gated")
+    manifest = export_refine_into(
+        build_model(gated).eval(), gated, out, {"validation": {"mae": 1.0}}, macs_at=None
+    )
+    on_disk = json.loads((out / "model.json").read_text())
+    assert on_disk == json.loads(json.dumps(manifest))
+    assert on_disk["variant"] == "gated"
+    assert on_disk["graphs"]["flow"] == before["graphs"]["flow"]
+    assert on_disk["graphs"]["fuse"] == before["graphs"]["fuse"]
+    assert (out / "flow.onnx").read_bytes() == flow_bytes
+    refine = on_disk["graphs"]["refine"]
+    assert refine["sha256"] == hashlib.sha256((out / "refine.onnx").read_bytes()).hexdigest()
+    assert refine["sha256"] != before["graphs"]["refine"]["sha256"]
+    assert on_disk["validation"]["aepe"] == 2.0 and on_disk["validation"]["refine"] == {"mae": 1.0}
+    assert on_disk["training"]["refine"]["profile"]["variant"] == "gated"
+
+
+def test_refine_only_export_refuses_another_normalisation(tmp_path: Path) -> None:
+    base = get_profile("smoke")
+    out = tmp_path / "bundle"
+    export_bundle(build_model(base).eval(), base, out, macs_at=None, check=False)
+    from dear_train.data.dataset import Normalisation
+
+    other = get_profile("smoke", variant="gated", norm=Normalisation(max_depth=8.0))
+    with pytest.raises(ValueError, match="normalisation"):
+        export_refine_into(build_model(other).eval(), other, out, check=False, macs_at=None)

@@ -144,3 +144,70 @@ def test_nograd_trains_without_the_gradient_term() -> None:
     pred = model.refine_depth(b["rgb"], b["amplitude"], b["tof_depth"], b["flow"])["depth"]
     assert torch.isclose(loss, depth_loss(pred, b["gt_depth"], b["flow_valid"], lam=0.0))
     assert not torch.isclose(loss, depth_loss(pred, b["gt_depth"], b["flow_valid"]))
+
+
+def _gated_maps(
+    logits: torch.Tensor, bias: float = 0.0, gate: float = 1.0, sharp: float = 0.0
+) -> torch.Tensor:
+    """Head maps of the gated variant with a given kernel, bias, gate and log-sharpness."""
+    n, _, h, w = logits.shape
+    from dear_train.models.kpn import GATED_MAX_BIAS
+
+    b = torch.full((n, 1, h, w), float(np.arctanh(bias / GATED_MAX_BIAS)))
+    g = torch.full((n, 1, h, w), float(np.log(gate / (1 - gate))) if gate < 1 else 30.0)
+    s = torch.full((n, 1, h, w), sharp)
+    return torch.cat([logits, b, g, s], dim=1).double()
+
+
+def test_gated_never_mixes_holes_into_valid_depth() -> None:
+    """Neighbours with depth 0 get no weight: the output stays within the valid neighbours."""
+    from dear_train.models.kpn import GatedKernelApply
+
+    rng = np.random.default_rng(3)
+    depth = torch.from_numpy(rng.uniform(0.1, 0.3, (1, 1, H, W)))
+    depth[0, 0, 1:3, 2:4] = 0.0
+    maps = _gated_maps(torch.from_numpy(rng.normal(size=(1, 9, H, W))), sharp=-30.0)
+    out = GatedKernelApply()(depth, maps)
+    assert (out[depth == 0] == 0).all()  # invalid stays invalid
+    valid = depth > 0
+    assert out[valid].min() >= depth[valid].min() - 1e-12
+    assert out[valid].max() <= depth[valid].max() + 1e-12
+
+
+def test_gated_keeps_a_depth_step_sharp_and_smooths_a_plane() -> None:
+    """Uniform logits: noise on each side of a step is averaged, the step is not blurred."""
+    from dear_train.models.kpn import GatedKernelApply
+
+    rng = np.random.default_rng(4)
+    clean = torch.full((1, 1, 12, 12), 0.1, dtype=torch.float64)
+    clean[..., 6:] = 0.3  # a 2 m step at 10 m normalisation
+    noisy = clean + torch.from_numpy(rng.normal(scale=0.0005, size=clean.shape))
+    out = GatedKernelApply()(noisy, _gated_maps(torch.zeros(1, 9, 12, 12, dtype=torch.float64)))
+    assert (out - clean).abs().max() < 0.003  # nothing crosses the step
+    assert (out - clean).abs().mean() < 0.75 * (noisy - clean).abs().mean()
+
+
+def test_gated_gate_and_bias_do_what_they_say() -> None:
+    from dear_train.models.kpn import GatedKernelApply
+
+    depth = torch.full((1, 1, H, W), 0.2, dtype=torch.float64)
+    logits = torch.zeros(1, 9, H, W, dtype=torch.float64)
+    closed = GatedKernelApply()(depth, _gated_maps(logits, bias=0.03, gate=1e-9))
+    torch.testing.assert_close(closed, depth)  # closed gate: the input
+    half = GatedKernelApply()(depth, _gated_maps(logits, bias=0.03, gate=0.5))
+    torch.testing.assert_close(half, depth + 0.015)
+    # The bias is bounded whatever the head says.
+    maps = _gated_maps(logits, gate=0.999999)
+    maps[:, 9] = 1e6
+    from dear_train.models.kpn import GATED_MAX_BIAS
+
+    assert GatedKernelApply()(depth, maps).max() <= 0.2 + GATED_MAX_BIAS + 1e-9
+
+
+def test_gated_refiner_starts_close_to_the_input() -> None:
+    torch.manual_seed(0)
+    net = build_refine("edge", "gated").eval()
+    depth = torch.rand(1, 1, 48, 64) * 0.3 + 0.05
+    with torch.no_grad():
+        out = net(torch.rand(1, 1, 48, 64), depth, torch.rand(1, 3, 48, 64))
+    assert (out - depth).abs().mean() < 0.002

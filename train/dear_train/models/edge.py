@@ -12,8 +12,9 @@ Same architectures and I/O as the paper tier, so the daemon runs either bundle u
 - the flow net adds a parameter-free edge-matching prior (:mod:`.matching`) to its outputs and
   learns a correction to it: RGB and IR texture differ, and from scratch on a CPU budget the
   net did not learn to match them;
-- the refinement backbone runs at 1/2 resolution and its kernels are upsampled and applied to
-  the full-resolution depth, which keeps the edge-preserving filtering at full resolution.
+- the refinement backbone runs at 1/2 resolution (1/4 for the ``gated`` variant) and its
+  kernels are upsampled and applied to the full-resolution depth, which keeps the
+  edge-preserving filtering at full resolution.
 
 ``models/complexity.py`` measures what this buys (README, "Model sizes").
 """
@@ -29,6 +30,11 @@ EDGE_FLOW = FlowNetCConfig(
 )
 EDGE_FUSION = FusionConfig(width=0.25, separable=True)
 EDGE_REFINE = UNetConfig(widths=(16, 32, 32, 64), separable=True, backbone_stride=2)
+#: The gated refiner's backbone runs at 1/4 resolution: its output is a blend of full-resolution
+#: neighbours whose weights are cut at depth edges at full resolution, so the backbone only has
+#: to say *how much* to smooth and correct, which varies slowly (cost budget: ≤ 15 ms per
+#: 640×480 frame on one core, shared with the real-time issue).
+EDGE_GATED_REFINE = UNetConfig(widths=(16, 32, 32, 64), separable=True, backbone_stride=4)
 
 
 def edge_flow() -> FlowNetC:
@@ -43,4 +49,4 @@ def edge_fusion() -> FusionNet:
 
 def edge_refine(variant: str = "kpn") -> RefineNet:
     """The edge-tier refinement net (any variant of :mod:`dear_train.models.kpn`)."""
-    return RefineNet(variant, EDGE_REFINE)
+    return RefineNet(variant, EDGE_GATED_REFINE if variant == "gated" else EDGE_REFINE)

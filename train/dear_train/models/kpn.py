@@ -12,6 +12,11 @@ the network and of the exported graph.
 
 Depths inside the net are normalised: metres / ``max_depth``. Border pixels see a replicated
 neighbourhood (``Pad`` mode ``edge``) rather than zeros, which would read as "no depth".
+
+The ``gated`` variant (what the edge bundle ships, :class:`GatedKernelApply`) is built to be
+*safe* off its training distribution: its weights are a convex combination over the valid
+neighbours only, attenuated across depth discontinuities at full resolution, its bias is
+bounded, and a predicted gate blends the result with the input depth. See that class.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ VARIANTS = (
     "nonormnobias",
     "norgb",
     "deeptof",
+    "gated",
 )
 
 #: Epsilon of the kernel normalisation ``Σ(|w| + ε)``.
@@ -64,7 +70,15 @@ def filter_mode(variant: str) -> FilterMode | None:
         "nonormnobias": FilterMode(False, "none"),
         "unet": None,
         "deeptof": None,
+        "gated": None,
     }[variant]
+
+
+def head_channels(variant: str) -> int:
+    """Output channels of a variant's backbone: gated maps, kernel + bias, or a depth."""
+    if variant == "gated":
+        return GATED_CHANNELS
+    return 10 if filter_mode(variant) is not None else 1
 
 
 def uses_rgb(variant: str) -> bool:
@@ -83,6 +97,52 @@ def neighbourhood(x: torch.Tensor) -> torch.Tensor:
     return torch.cat(
         [xp[:, :, dy : dy + h, dx : dx + w] for dy in range(3) for dx in range(3)], dim=1
     )
+
+
+#: Largest depth correction the ``gated`` variant can make, in normalised depth (× max_depth =
+#: 0.5 m at 10 m): multi-path errors of indoor scenes stay below it, and a bounded bias cannot
+#: throw a pixel arbitrarily far when the input is unlike anything seen in training.
+GATED_MAX_BIAS = 0.05
+#: Scale of the depth-range attenuation of the ``gated`` kernels: a neighbour ``Δ`` away
+#: (normalised depth) loses ``exp(−GATED_RANGE_SCALE · e^s · |Δ|)`` of its weight, ``s`` the
+#: predicted log-sharpness (0 at initialisation: 1 cm costs a factor e^-0.1, 10 cm e^-1).
+GATED_RANGE_SCALE = 100.0
+#: Logit weight that removes an invalid (zero-depth) neighbour from the softmax.
+_INVALID_LOGIT = 1e4
+#: Channels of the ``gated`` head: 9 kernel logits, bias, gate, range log-sharpness.
+GATED_CHANNELS = 12
+#: Initial gate logit: sigmoid(−2) ≈ 0.12, so training starts close to "output = input".
+GATED_GATE_INIT = -2.0
+
+
+class GatedKernelApply(nn.Module):
+    """The ``gated`` refinement: ``out = D + g · (Σ ŵ_i · D_i + b − D)`` on valid pixels.
+
+    From the head's 12 maps (already at full resolution): 9 kernel logits ``a_i``, a bias ``b``
+    (``GATED_MAX_BIAS · tanh``), a gate ``g`` (sigmoid) and a log-sharpness ``s``. The weights
+
+        ``ŵ = softmax_i(a_i − GATED_RANGE_SCALE · e^s · |D_i − D| − 1e4 · [D_i invalid])``
+
+    are convex over the *valid* neighbours only, so a hole never pulls depth towards 0 (the
+    paper's Σ|w| normalisation mixes zeros in), and they are cut across depth discontinuities
+    at full resolution even though the backbone predicts them at 1/4 resolution, so the filter
+    cannot blur a sharp edge into flying pixels. The output stays within the neighbours' range
+    plus a bounded bias, scaled by a gate that falls back to the input where the network is
+    unsure. Invalid input pixels stay invalid (0).
+    """
+
+    def forward(self, depth: torch.Tensor, maps: torch.Tensor) -> torch.Tensor:
+        logits = maps[:, :9]
+        bias = GATED_MAX_BIAS * torch.tanh(maps[:, 9:10])
+        gate = torch.sigmoid(maps[:, 10:11])
+        sharp = GATED_RANGE_SCALE * torch.exp(maps[:, 11:12])
+        nb = neighbourhood(depth)
+        valid_nb = (nb > 0).to(depth.dtype)
+        a = logits - sharp * (nb - depth).abs() - _INVALID_LOGIT * (1.0 - valid_nb)
+        w = torch.softmax(a, dim=1)
+        filtered = (w * nb).sum(dim=1, keepdim=True)
+        out = depth + gate * (filtered + bias - depth)
+        return out * (depth > 0).to(depth.dtype)
 
 
 class KernelApply(nn.Module):
@@ -112,8 +172,9 @@ class UNetConfig:
 
     widths: tuple[int, int, int, int] = (64, 128, 128, 256)
     separable: bool = False
-    #: Backbone runs at 1/``backbone_stride`` of the input (edge tier: 2); its kernel maps are
-    #: upsampled bilinearly and applied at full resolution.
+    #: Backbone runs at 1/``backbone_stride`` (1, 2 or 4) of the input (edge tier: 2; the
+    #: gated edge refiner: 4); its kernel maps are upsampled bilinearly and applied at full
+    #: resolution.
     backbone_stride: int = 1
 
     def to_dict(self) -> dict:
@@ -134,8 +195,10 @@ class UNet(nn.Module):
             self.enc0 = nn.Sequential(conv(cin, w0, 3, 1), conv(w0, w0, 3, 1, s))
         elif self.stride == 2:
             self.enc0 = nn.Sequential(conv(cin, w0, 3, 2), conv(w0, w0, 3, 1, s))
+        elif self.stride == 4:
+            self.enc0 = nn.Sequential(conv(cin, w0, 3, 2), conv(w0, w0, 3, 2, s))
         else:
-            raise ValueError("backbone_stride must be 1 or 2")
+            raise ValueError("backbone_stride must be 1, 2 or 4")
         self.enc1 = nn.Sequential(conv(w0, w1, 3, 2, s), conv(w1, w1, 3, 1, s))
         self.enc2 = nn.Sequential(conv(w1, w2, 3, 2, s), conv(w2, w2, 3, 1, s))
         self.enc3 = nn.Sequential(conv(w2, w3, 3, 2, s), conv(w3, w3, 3, 1, s))
@@ -148,6 +211,13 @@ class UNet(nn.Module):
         self.head = nn.Conv2d(w0, cout, 3, 1, 1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        out = self.forward_lowres(x)
+        if self.stride > 1:
+            out = resize_like(out, x, self.stride)
+        return out
+
+    def forward_lowres(self, x: torch.Tensor) -> torch.Tensor:
+        """The head's maps at the backbone's resolution (1/``backbone_stride``)."""
         e0 = self.enc0(x)
         e1 = self.enc1(e0)
         e2 = self.enc2(e1)
@@ -155,10 +225,7 @@ class UNet(nn.Module):
         d2 = self.dec2(torch.cat([e2, crop_like(self.up2(e3), e2)], dim=1))
         d1 = self.dec1(torch.cat([e1, crop_like(self.up1(d2), e1)], dim=1))
         d0 = self.dec0(torch.cat([e0, crop_like(self.up0(d1), e0)], dim=1))
-        out = self.head(d0)
-        if self.stride > 1:
-            out = resize_like(out, x, self.stride)
-        return out
+        return self.head(d0)
 
 
 class RefineNet(nn.Module):
@@ -178,27 +245,48 @@ class RefineNet(nn.Module):
         self.config = config or UNetConfig()
         self.mode = filter_mode(variant)
         cin = 5 if uses_rgb(variant) else 2
-        cout = 10 if self.mode is not None else 1
+        cout = head_channels(variant)
         self.backbone = UNet(cin, cout, self.config)
         self.apply_kernel = KernelApply(self.mode) if self.mode is not None else None
+        self.apply_gated = GatedKernelApply() if variant == "gated" else None
         head = self.backbone.head
         # Small head weights (not zero, so gradients still reach the backbone at step one) and,
         # for the kernel variants, a bias making the initial kernel the identity: training
-        # starts from "output = input depth".
+        # starts from "output = input depth". The gated variant starts with uniform logits
+        # (the range term keeps them off edges) behind a mostly closed gate.
         head.weight.data.mul_(0.01)
         nn.init.zeros_(head.bias)
         if self.mode is not None:
             head.bias.data[4] = 1.0
+        if variant == "gated":
+            head.bias.data[10] = GATED_GATE_INIT
 
-    def forward(
-        self, amplitude: torch.Tensor, depth: torch.Tensor, rgb: torch.Tensor | None = None
+    def _inputs(
+        self, amplitude: torch.Tensor, depth: torch.Tensor, rgb: torch.Tensor | None
     ) -> torch.Tensor:
         parts = [amplitude, depth]
         if uses_rgb(self.variant):
             if rgb is None:
                 raise ValueError(f"variant {self.variant!r} needs the RGB image")
             parts.append(rgb)
-        out = self.backbone(torch.cat(parts, dim=1))
+        return torch.cat(parts, dim=1)
+
+    def gated_maps(
+        self, amplitude: torch.Tensor, depth: torch.Tensor, rgb: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """The ``gated`` variant's head maps at the backbone's resolution: what its exported
+        graph outputs (the daemon upsamples and applies them, as :meth:`forward` does)."""
+        if self.apply_gated is None:
+            raise ValueError(f"variant {self.variant!r} has no gated maps")
+        return self.backbone.forward_lowres(self._inputs(amplitude, depth, rgb))
+
+    def forward(
+        self, amplitude: torch.Tensor, depth: torch.Tensor, rgb: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        if self.apply_gated is not None:
+            maps = self.gated_maps(amplitude, depth, rgb)
+            return self.apply_gated(depth, resize_like(maps, depth, self.backbone.stride))
+        out = self.backbone(self._inputs(amplitude, depth, rgb))
         if self.apply_kernel is None:
             if self.variant == "deeptof":
                 return depth + out

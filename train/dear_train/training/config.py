@@ -11,6 +11,7 @@ Profiles:
   run it). Not a useful model.
 - ``cpu``: the edge tier at 192×256 crops, sized for a 2-core machine: on 720 training frames
   (180 steps per epoch) ≈ 35 min wall time (README, "Training").
+- ``cpu-gated``: the shipped edge refiner (``gated`` variant) alone, on the ``train`` family.
 - ``gpu``: the paper's recipe: paper tier, Adam, batch 3, crops 384×512, lr 4e-4 (1e-5 for the
   fine-tune), ×0.7 every 2 epochs; 20 + 20 + 40 + 10 epochs.
 """
@@ -113,6 +114,22 @@ PROFILES: dict[str, Profile] = {
         ),
         max_steps_per_epoch=400,
         max_val_batches=20,
+        num_workers=1,
+    ),
+    # The shipped edge refiner: the ``gated`` variant trained on its own (the bundle keeps its
+    # flow graphs; ``dear-export --refine-only``) on the ``train`` family of dear-synth
+    # (synth/src/family.rs), ≈ 35 min on 2 idle CPU cores (models/edge/README.md).
+    "cpu-gated": Profile(
+        name="cpu-gated",
+        tier="edge",
+        variant="gated",
+        crop=(192, 256),
+        batch_size=4,
+        stages=(Stage("refine", 10, 1e-3),),
+        lr_decay_every=3,
+        max_steps_per_epoch=300,
+        max_val_batches=30,
+        val_fraction=0.05,
         num_workers=1,
     ),
     "gpu": Profile(

@@ -67,7 +67,11 @@ class StageLoss(nn.Module):
         parts: dict[str, torch.Tensor] = {}
         if self.stage == "refine":
             r = m.refine_depth(rgb, amp, tof, gt_flow)
-            parts["depth"] = self._depth(r["depth"], gt, depth_valid)
+            # Only pixels with a warped measurement: the refiner filters depth, it does not
+            # invent it where none maps (the daemon publishes 0 there). Counting holes taught
+            # the gated refiner to lower all depth by its largest bias, shrinking the step at
+            # every hole edge that the gradient term saw.
+            parts["depth"] = self._depth(r["depth"], gt, depth_valid & r["depth_warped_valid"])
         else:
             assert m.flow is not None
             if self.stage == "flow":

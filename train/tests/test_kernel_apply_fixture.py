@@ -1,0 +1,47 @@
+"""``fixtures/kernel_apply/gated.json`` still is what the Python definition computes.
+
+The Rust tail of format-2 bundles is checked against that file
+(``pipeline/tests/kernel_apply_parity.rs``); this test fails when the PyTorch definition or the
+constants of the gated refiner change without the fixture being regenerated.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import types
+from pathlib import Path
+
+import numpy as np
+
+from dear_train.export import refine_apply_spec
+from dear_train.models import build_refine
+
+FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "kernel_apply"
+
+
+def _maker() -> types.ModuleType:
+    spec = importlib.util.spec_from_file_location("make_gated", FIXTURE / "make_gated.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_fixture_matches_the_python_definition() -> None:
+    doc = json.loads((FIXTURE / "gated.json").read_text())
+    make = _maker()
+    c = make.case()
+    for k in ("depth", "maps"):
+        np.testing.assert_array_equal(np.array(doc[k]["data"], np.float32), c[k].ravel())
+    want = np.array(doc["out"]["data"], np.float32).reshape(doc["out"]["shape"])
+    np.testing.assert_allclose(make.expected(c["depth"], c["maps"]), want, atol=1e-6)
+
+
+def test_fixture_constants_are_the_exported_ones() -> None:
+    apply = refine_apply_spec(build_refine("edge", "gated"))
+    assert apply is not None
+    doc = json.loads((FIXTURE / "gated.json").read_text())
+    assert apply["stride"] == doc["stride"]
+    # The Rust test hard-codes these two; the exporter writes them into model.json.
+    assert (apply["max_bias"], apply["range_scale"]) == (0.05, 100.0)
