@@ -10,11 +10,13 @@
 //! - [`sensor`]: 4-tap correlation, shot/read noise, demodulation, unwrapping, radial → z;
 //! - [`simulate`]: one aligned sample from a scene;
 //! - [`dataset`]: writing capture directories (`generate`);
+//! - [`family`]: training and held-out families of sensor and scene settings (`family`);
 //! - [`perturb`]: misaligned test/training sets with ground-truth flow;
 //! - [`sequence`]: moving scenes with drifting calibration;
 //! - [`preview`]: colour maps and the preview panel.
 
 pub mod dataset;
+pub mod family;
 pub mod geometry;
 pub mod math;
 pub mod perturb;

@@ -9,6 +9,7 @@ use dear_pipeline::capture::CaptureDir;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use dear_synth::dataset::{generate, GenerateParams};
+use dear_synth::family::{shard_dir_name, Family};
 use dear_synth::perturb::{perturb_dir, PerturbMode};
 use dear_synth::preview::panel;
 use dear_synth::scene::SceneConfig;
@@ -34,6 +35,24 @@ enum Command {
         count: usize,
         #[command(flatten)]
         common: Common,
+    },
+    /// Render a family of sensor and scene settings (synth/src/family.rs) as shards: one
+    /// capture directory per draw of the settings, `OUT/shard-NNN`, aligned frames.
+    Family {
+        #[arg(long, value_enum)]
+        family: Family,
+        #[arg(long, default_value_t = 10)]
+        shards: usize,
+        #[arg(long, default_value_t = 100)]
+        frames_per_shard: usize,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        #[arg(long)]
+        out: PathBuf,
+        #[arg(long, default_value_t = 320)]
+        width: usize,
+        #[arg(long, default_value_t = 240)]
+        height: usize,
     },
     /// Misalign an aligned capture: new RGB view, GT depth, mask and flow per frame.
     Perturb {
@@ -195,6 +214,29 @@ fn main() -> Result<()> {
             generate(&common.out, &params, |i| pb.set_position(i as u64))?;
             pb.finish();
             report("generate", count, start, common.width, common.height);
+        }
+        Command::Family {
+            family,
+            shards,
+            frames_per_shard,
+            seed,
+            out,
+            width,
+            height,
+        } => {
+            let total = shards * frames_per_shard;
+            let pb = bar(total, family.name());
+            let start = Instant::now();
+            for shard in 0..shards {
+                let params = family.draw(seed, shard as u64, frames_per_shard, width, height);
+                let dir = out.join(shard_dir_name(shard));
+                generate(&dir, &params, |i| {
+                    pb.set_position((shard * frames_per_shard + i) as u64)
+                })
+                .with_context(|| format!("{} shard {shard}", family.name()))?;
+            }
+            pb.finish();
+            report(family.name(), total, start, width, height);
         }
         Command::Perturb {
             input,

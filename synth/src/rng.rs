@@ -21,6 +21,8 @@ pub enum Stream {
     Perturbation = 4,
     /// Motion and drift of a sequence.
     Sequence = 5,
+    /// Sensor and scene settings of one shard of a dataset family.
+    Family = 6,
 }
 
 /// SplitMix64 finaliser: a strong 64-bit mixing function.
