@@ -15,6 +15,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use dear_pipeline::dear::{
     CachedFusion, ChainInput, ChainMode, ChainOptions, ChainOutput, DearChain,
 };
+use dear_pipeline::model::kernel_apply::{apply_gated, GatedKernel, GATED_CHANNELS};
 use dear_pipeline::model::{ModelBundle, RunnerOptions};
 use dear_pipeline::{Calibration, Flow};
 use ndarray::{Array2, Array3};
@@ -177,5 +178,35 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+/// The format-2 refiner's tail alone (`model::kernel_apply`): twelve 1/4-resolution maps
+/// upsampled and applied to a 640×480 depth map, on the rayon pool (both cores).
+fn bench_gated_tail(c: &mut Criterion) {
+    let (_, _, depth) = frame();
+    let (h4, w4) = (H / 4, W / 4);
+    let maps: Vec<Array2<f32>> = (0..GATED_CHANNELS)
+        .map(|ch| {
+            Array2::from_shape_fn((h4, w4), |(y, x)| {
+                0.3 * ((ch * 7 + y * 3 + x) % 11) as f32 / 11.0 - 0.1
+            })
+        })
+        .collect();
+    let kernel = GatedKernel {
+        stride: 4,
+        max_bias: 0.05,
+        range_scale: 100.0,
+        max_depth_m: 10.0,
+    };
+    let mut out = Array2::zeros((H, W));
+    let mut group = c.benchmark_group("dear_chain_vga");
+    group.sample_size(20);
+    group.bench_function("gated_tail", |b| {
+        b.iter(|| {
+            apply_gated(&maps, depth.view(), out.view_mut(), &kernel);
+            black_box(&out);
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench, bench_gated_tail);
 criterion_main!(benches);

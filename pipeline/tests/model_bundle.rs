@@ -127,9 +127,15 @@ fn invalid_manifests_are_refused() {
     assert!(err.to_string().contains("not valid JSON"), "{err}");
 
     let dir = copy_bundle();
+    edit_manifest(dir.path(), |v| v["format_version"] = 3.into());
+    let err = load_err(dir.path());
+    assert!(err.to_string().contains("format_version 3"), "{err}");
+
+    // Format 2 without the refine graph's "apply" (what the chain would do with its output).
+    let dir = copy_bundle();
     edit_manifest(dir.path(), |v| v["format_version"] = 2.into());
     let err = load_err(dir.path());
-    assert!(err.to_string().contains("format_version 2"), "{err}");
+    assert!(err.to_string().contains("needs \"apply\""), "{err}");
 
     let dir = copy_bundle();
     edit_manifest(dir.path(), |v| v["format"] = "something-else".into());

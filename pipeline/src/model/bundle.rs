@@ -15,7 +15,9 @@ use tract_onnx::tract_hir::infer::Factoid;
 use tract_onnx::tract_hir::internal::DimLike;
 
 use crate::model::error::BundleError;
-use crate::model::manifest::{contract, static_role, Manifest, Normalisation, GRAPH_ROLES};
+use crate::model::manifest::{
+    contract, output_contract, static_role, Manifest, Normalisation, GRAPH_ROLES,
+};
 
 /// A verified, parsed bundle, ready to be instantiated for a stream resolution.
 #[derive(Debug, Clone)]
@@ -110,6 +112,12 @@ impl ModelBundle {
         self.graph("refine").input_names.iter().any(|n| n == "rgb")
     }
 
+    /// How the chain applies the refine graph's output (format 2), or `None` when the graph
+    /// outputs the refined depth itself (format 1).
+    pub fn refine_apply(&self) -> Option<&crate::model::manifest::RefineApply> {
+        self.manifest.graph("refine").and_then(|g| g.apply.as_ref())
+    }
+
     pub(crate) fn graph(&self, role: &str) -> &LoadedGraph {
         self.graphs
             .iter()
@@ -191,10 +199,11 @@ fn parse_graph(
         .iter()
         .map(|o| model.outlet_label(*o).unwrap_or("<unnamed>"))
         .collect();
-    if labels != [contract.output.0] {
+    let output = output_contract(role, spec.apply.as_ref());
+    if labels != [output.0] {
         return Err(broken(format!(
             "the ONNX graph's outputs are {labels:?}, expected [{:?}]",
-            contract.output.0
+            output.0
         )));
     }
     Ok(LoadedGraph {

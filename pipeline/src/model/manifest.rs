@@ -15,8 +15,10 @@ use crate::model::error::BundleError;
 
 /// The `format` field every bundle manifest carries.
 pub const BUNDLE_FORMAT: &str = "dear-model-bundle";
-/// The manifest version this crate reads.
-pub const BUNDLE_FORMAT_VERSION: u64 = 1;
+/// The newest manifest version this crate reads. Version 1: `refine.onnx` outputs the refined
+/// depth. Version 2 adds `graphs.refine.apply` ([`RefineApply`]): the graph outputs maps at a
+/// lower resolution that the chain applies in Rust (`model::kernel_apply`). Both load.
+pub const BUNDLE_FORMAT_VERSION: u64 = 2;
 
 /// The parsed `model.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -68,6 +70,34 @@ pub struct GraphSpec {
     pub sha256: String,
     /// File size in bytes.
     pub bytes: u64,
+    /// Format 2, refine graph only: how the chain applies the graph's output.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub apply: Option<RefineApply>,
+}
+
+/// `graphs.refine.apply` of a format-2 bundle: the refine graph outputs `channels` maps at
+/// 1/`stride` resolution, applied by `model::kernel_apply` (the exporter writes the full
+/// definition beside these numbers).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RefineApply {
+    /// Always `"gated-kernel"` (the only kind this crate applies).
+    pub kind: String,
+    /// Upsampling factor of the maps (2, 4 or 8; divides `input_size_multiple`).
+    pub stride: usize,
+    /// Always 12.
+    pub channels: usize,
+    /// Largest depth correction, normalised depth.
+    pub max_bias: f32,
+    /// Scale of the depth-range attenuation of the kernel weights.
+    pub range_scale: f32,
+}
+
+/// The output the chain reads from graph `role`: `(name, channels)`.
+pub(crate) fn output_contract(role: &str, apply: Option<&RefineApply>) -> (&'static str, usize) {
+    match (role, apply) {
+        ("refine", Some(a)) => ("refine_maps", a.channels),
+        _ => contract(role).expect("every role has a contract").output,
+    }
 }
 
 /// One input or output tensor: its name and `[N, C, H, W]` shape (symbols or numbers).
@@ -154,10 +184,10 @@ impl Manifest {
             None => return Err(bad(format!("no \"format\": {BUNDLE_FORMAT:?} field"))),
         }
         match value.get("format_version").and_then(|v| v.as_u64()) {
-            Some(BUNDLE_FORMAT_VERSION) => {}
+            Some(1..=BUNDLE_FORMAT_VERSION) => {}
             Some(v) => {
                 return Err(bad(format!(
-                    "format_version {v} is not supported (this build reads {BUNDLE_FORMAT_VERSION})"
+                    "format_version {v} is not supported (this build reads 1 to {BUNDLE_FORMAT_VERSION})"
                 )))
             }
             None => return Err(bad("no integer \"format_version\" field".into())),
@@ -214,9 +244,27 @@ impl Manifest {
                 g.sha256
             )));
         }
+        match (&g.apply, role, self.format_version) {
+            (None, "refine", 2) => {
+                return Err(broken(
+                    "format_version 2 needs \"apply\" on the refine graph".into(),
+                ))
+            }
+            (Some(_), "refine", 1) => {
+                return Err(broken(
+                    "\"apply\" needs format_version 2 (this manifest says 1)".into(),
+                ))
+            }
+            (Some(_), "flow" | "fuse", _) => {
+                return Err(broken("only the refine graph may have \"apply\"".into()))
+            }
+            (Some(a), _, _) => check_apply(a, self.input_size_multiple).map_err(&broken)?,
+            (None, _, _) => {}
+        }
         let contract = contract(role).expect("GRAPH_ROLES all have contracts");
         check_tensors(&g.inputs, contract.inputs, "input").map_err(&broken)?;
-        let out = [(contract.output.0, contract.output.1, true)];
+        let output = output_contract(role, g.apply.as_ref());
+        let out = [(output.0, output.1, true)];
         check_tensors(&g.outputs, &out, "output").map_err(&broken)?;
         if role == "refine" {
             let has_rgb = g.inputs.iter().any(|t| t.name == "rgb");
@@ -241,6 +289,35 @@ impl Manifest {
     pub fn graph(&self, role: &str) -> Option<&GraphSpec> {
         self.graphs.get(role)
     }
+}
+
+/// Checks a refine graph's `apply` against what [`crate::model::kernel_apply`] implements.
+fn check_apply(a: &RefineApply, multiple: usize) -> Result<(), String> {
+    if a.kind != "gated-kernel" {
+        return Err(format!(
+            "apply.kind {:?} is unknown (this build applies \"gated-kernel\")",
+            a.kind
+        ));
+    }
+    if a.channels != crate::model::kernel_apply::GATED_CHANNELS {
+        return Err(format!(
+            "apply.channels is {}, a gated-kernel head has {}",
+            a.channels,
+            crate::model::kernel_apply::GATED_CHANNELS
+        ));
+    }
+    if !matches!(a.stride, 2 | 4 | 8) || !multiple.is_multiple_of(a.stride) {
+        return Err(format!(
+            "apply.stride {} must be 2, 4 or 8 and divide input_size_multiple {multiple}",
+            a.stride
+        ));
+    }
+    for (name, v) in [("max_bias", a.max_bias), ("range_scale", a.range_scale)] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(format!("apply.{name} {v} is not a positive number"));
+        }
+    }
+    Ok(())
 }
 
 /// Checks declared tensors against a contract: every declared name is known, every required one

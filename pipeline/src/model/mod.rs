@@ -3,6 +3,7 @@
 //!
 //! - [`manifest`]: `model.json` and the graphs' I/O contract;
 //! - [`bundle`]: [`ModelBundle::load`], checksum and contract checks;
+//! - [`kernel_apply`]: the full-resolution tail of a format-2 (`gated`) refiner, in Rust;
 //! - [`runner`]: [`BundleRunner`], the graphs optimised for one stream resolution, with
 //!   replicate padding to the bundle's size multiple;
 //! - [`error`]: the error type, [`BundleError`].
@@ -12,10 +13,11 @@
 
 pub mod bundle;
 pub mod error;
+pub mod kernel_apply;
 pub mod manifest;
 pub mod runner;
 
 pub use bundle::ModelBundle;
 pub use error::BundleError;
-pub use manifest::{Manifest, Normalisation};
+pub use manifest::{Manifest, Normalisation, RefineApply};
 pub use runner::{BundleRunner, RunnerOptions};

@@ -11,13 +11,14 @@
 //! this crate's `multithread` feature) matrix products run on a private rayon pool of that
 //! size, attached to the plans, so the pipeline's own rayon work is not starved by them.
 
-use ndarray::{ArrayView2, ArrayViewMut2};
+use ndarray::{Array2, ArrayView2, ArrayViewMut2};
 use tract_onnx::prelude::*;
 
 use crate::frame::Flow;
 use crate::model::bundle::{LoadedGraph, ModelBundle};
 use crate::model::error::BundleError;
-use crate::model::manifest::contract;
+use crate::model::kernel_apply::{apply_gated, GatedKernel};
+use crate::model::manifest::{contract, output_contract};
 
 /// Largest padded side a runner accepts: beyond it a single plane is gigabytes.
 pub const MAX_SIDE: usize = 16384;
@@ -48,6 +49,8 @@ pub struct BundleRunner {
     flow: GraphRunner,
     fuse: GraphRunner,
     refine: GraphRunner,
+    /// Format 2: the refiner's tail, applied in Rust, and the buffers of its maps.
+    refine_tail: Option<(GatedKernel, Vec<Array2<f32>>)>,
 }
 
 impl BundleRunner {
@@ -93,7 +96,27 @@ impl BundleRunner {
             executor,
             ..RunOptions::default()
         };
-        let build = |role: &str| GraphRunner::new(bundle.graph(role), padded, &run_options);
+        let apply = bundle.refine_apply();
+        let build = |role: &str| {
+            let (name, channels) = output_contract(role, apply.filter(|_| role == "refine"));
+            let stride = match (role, apply) {
+                ("refine", Some(a)) => a.stride,
+                _ => 1,
+            };
+            let output = GraphOutput {
+                name,
+                channels,
+                stride,
+            };
+            GraphRunner::new(bundle.graph(role), padded, &run_options, output)
+        };
+        let refine_tail = apply.map(|a| {
+            let k = GatedKernel::new(a, bundle.normalisation().max_depth_m);
+            let maps = (0..a.channels)
+                .map(|_| Array2::zeros((padded.0 / a.stride, padded.1 / a.stride)))
+                .collect();
+            (k, maps)
+        });
         Ok(BundleRunner {
             width,
             height,
@@ -102,6 +125,7 @@ impl BundleRunner {
             flow: build("flow")?,
             fuse: build("fuse")?,
             refine: build("refine")?,
+            refine_tail,
         })
     }
 
@@ -176,8 +200,25 @@ impl BundleRunner {
             })?;
             inputs.push(("rgb", &rgb_planes));
         }
-        self.refine.run(&inputs, &mut [out])
+        match &mut self.refine_tail {
+            None => self.refine.run(&inputs, &mut [out]),
+            Some((kernel, maps)) => {
+                let mut views: Vec<ArrayViewMut2<f32>> =
+                    maps.iter_mut().map(|m| m.view_mut()).collect();
+                self.refine.run(&inputs, &mut views)?;
+                apply_gated(maps, depth, out, kernel);
+                Ok(())
+            }
+        }
     }
+}
+
+/// What a graph outputs: its name, channels, and its resolution as a divisor of the input's.
+#[derive(Debug, Clone, Copy)]
+struct GraphOutput {
+    name: &'static str,
+    channels: usize,
+    stride: usize,
 }
 
 /// The executor of the plans: `None` (the calling thread) or a private pool.
@@ -208,6 +249,8 @@ struct GraphRunner {
     /// `(name, channels)` per graph input, in the graph's order.
     inputs: Vec<(String, usize)>,
     out_channels: usize,
+    /// The output is at 1/`out_stride` of the padded input and returned whole (not cropped).
+    out_stride: usize,
     padded: (usize, usize),
 }
 
@@ -227,6 +270,7 @@ impl GraphRunner {
         graph: &LoadedGraph,
         padded: (usize, usize),
         options: &RunOptions,
+        output: GraphOutput,
     ) -> Result<Self, BundleError> {
         let onnx_err = |e: TractError| BundleError::Onnx {
             path: graph.path.clone(),
@@ -249,8 +293,9 @@ impl GraphRunner {
             inputs.push((name.clone(), channels));
         }
         let typed = model.into_optimized().map_err(onnx_err)?;
-        let out_channels = contract.output.1;
-        let want: TVec<TDim> = tvec![1.into(), out_channels.into(), hp.into(), wp.into()];
+        let out_channels = output.channels;
+        let (ho, wo) = (hp / output.stride, wp / output.stride);
+        let want: TVec<TDim> = tvec![1.into(), out_channels.into(), ho.into(), wo.into()];
         let got = &typed.output_fact(0).map_err(onnx_err)?.shape;
         if got.iter().cloned().collect::<TVec<TDim>>() != want {
             return Err(BundleError::Contract {
@@ -258,7 +303,7 @@ impl GraphRunner {
                 graph: graph.role,
                 message: format!(
                     "output {:?} has shape {got:?} for {hp}x{wp} inputs, expected {want:?}",
-                    contract.output.0
+                    output.name
                 ),
             });
         }
@@ -271,12 +316,15 @@ impl GraphRunner {
             state,
             inputs,
             out_channels,
+            out_stride: output.stride,
             padded,
         })
     }
 
     /// Pads the named inputs into tensors, runs, crops the single output into `outputs`
-    /// (one plane per output channel).
+    /// (one plane per output channel; with `out_stride > 1`, the whole low-resolution output).
+    /// Every input plane has the shape of the first output plane (`out_stride` 1) or of the
+    /// first input's (otherwise).
     fn run(
         &mut self,
         provided: &[(&str, &[ArrayView2<f32>])],
@@ -286,16 +334,32 @@ impl GraphRunner {
             graph: self.role,
             message,
         };
-        let dim = outputs
+        let out_dim = outputs
             .first()
             .map(|o| o.dim())
             .ok_or_else(|| run_err("no output planes".into()))?;
-        if outputs.len() != self.out_channels || outputs.iter().any(|o| o.dim() != dim) {
+        if outputs.len() != self.out_channels || outputs.iter().any(|o| o.dim() != out_dim) {
             return Err(run_err(format!(
                 "expected {} output planes of one shape",
                 self.out_channels
             )));
         }
+        let (hp, wp) = self.padded;
+        let (ho, wo) = (hp / self.out_stride, wp / self.out_stride);
+        let dim = if self.out_stride == 1 {
+            out_dim
+        } else {
+            if out_dim != (ho, wo) {
+                return Err(run_err(format!(
+                    "output planes are {out_dim:?}, expected the graph's {ho}x{wo}"
+                )));
+            }
+            provided
+                .first()
+                .and_then(|(_, p)| p.first())
+                .map(|p| p.dim())
+                .ok_or_else(|| run_err("no input planes".into()))?
+        };
         let mut tensors: TVec<TValue> = TVec::with_capacity(self.inputs.len());
         for (name, channels) in &self.inputs {
             let planes = provided
@@ -331,10 +395,9 @@ impl GraphRunner {
         let out = result
             .first()
             .ok_or_else(|| run_err("the graph returned no output".into()))?;
-        let (hp, wp) = self.padded;
-        if out.shape() != [1, self.out_channels, hp, wp] {
+        if out.shape() != [1, self.out_channels, ho, wo] {
             return Err(run_err(format!(
-                "output shape {:?}, expected [1, {}, {hp}, {wp}]",
+                "output shape {:?}, expected [1, {}, {ho}, {wo}]",
                 out.shape(),
                 self.out_channels
             )));
@@ -345,16 +408,15 @@ impl GraphRunner {
         let data = plain
             .as_slice::<f32>()
             .map_err(|e| run_err(format!("{e:#}")))?;
-        let (h, w) = dim;
+        let w = out_dim.1;
         for (c, plane) in outputs.iter_mut().enumerate() {
-            let base = c * hp * wp;
+            let base = c * ho * wo;
             for (y, mut row) in plane.rows_mut().into_iter().enumerate() {
-                let src = &data[base + y * wp..base + y * wp + w];
+                let src = &data[base + y * wo..base + y * wo + w];
                 for (o, s) in row.iter_mut().zip(src) {
                     *o = *s;
                 }
             }
-            debug_assert_eq!(plane.dim(), (h, w));
         }
         Ok(())
     }
