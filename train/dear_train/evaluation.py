@@ -70,8 +70,11 @@ def evaluate(
     batches: Iterable[dict[str, torch.Tensor]],
     device: torch.device | str = "cpu",
     max_batches: int | None = None,
+    align: bool = True,
 ) -> dict[str, float]:
     """Every metric the model's parts allow, over ``batches`` of dataset samples.
+
+    ``align=False`` leaves out the flow and whole-pipeline metrics (for refine-only runs).
 
     - ``aepe_rough`` / ``aepe_refined``: mean EPE (px) of ``W_rough`` / ``W_refn``;
     - ``mae_input_misaligned``: the ToF depth as is (no alignment) against the RGB-view truth;
@@ -100,7 +103,7 @@ def evaluate(
         if model.refine is not None:
             r = model.refine_depth(rgb, amp, tof, b["flow"])
             acc["mae_refined_gtflow"].add(r["depth"], aligned, gt, valid)
-        if model.flow is not None:
+        if align and model.flow is not None:
             out = model.align(rgb, amp, tof)
             flows["aepe_rough"].append(float(epe(out["flow_rough"], b["flow"], valid)))
             if "flow_refn" in out:

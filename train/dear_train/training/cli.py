@@ -7,6 +7,8 @@ Examples::
     torchrun --nproc_per_node=4 -m dear_train.training.cli --profile gpu --data D --out runs/gpu
     dear-train --profile cpu --data D --out runs/cpu --resume              # continue a run
     dear-train --profile smoke --synthetic --out runs/smoke                # no data needed
+    dear-train --profile cpu-gated --variants kpn unet norgb --data D --out runs/variants
+                                   # refinement variants on identical batches: OUT/VARIANT/
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pathlib import Path
 from dear_train.models import TIERS, VARIANTS
 from dear_train.training.config import PROFILES, get_profile
 from dear_train.training.trainer import Trainer
+from dear_train.training.variants import train_side_by_side
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -37,6 +40,14 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--out", type=Path, required=True, help="run directory")
     p.add_argument("--tier", choices=TIERS, default=None, help="override the profile's tier")
     p.add_argument("--variant", choices=VARIANTS, default=None, help="refinement variant")
+    p.add_argument(
+        "--variants",
+        choices=VARIANTS,
+        nargs="+",
+        default=None,
+        help="train these refinement variants side by side on identical batches "
+        "(refine-only profiles; one run directory per variant under OUT)",
+    )
     p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: auto)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoints/last.pt")
     a = p.parse_args(argv)
@@ -51,6 +62,12 @@ def main(argv: list[str] | None = None) -> None:
             write_synthetic_capture(syn, frames=8)
         data.append(syn)
     profile = get_profile(a.profile, tier=a.tier, variant=a.variant)
+    if a.variants:
+        if a.variant or a.resume:
+            p.error("--variants trains from scratch; it takes neither --variant nor --resume")
+        finals = train_side_by_side(profile, a.variants, data, a.out, a.device)
+        print(json.dumps({"out": str(a.out), "final_validation": finals}, indent=2))
+        return
     metrics = Trainer(profile, data, a.out, a.device, a.resume).run()
     print(json.dumps({"out": str(a.out), "final_validation": metrics}, indent=2))
 

@@ -99,6 +99,28 @@ class StageLoss(nn.Module):
         return total, {k: float(v.detach()) for k, v in parts.items()}
 
 
+def split_datasets(profile: Profile, data: list[Path]) -> tuple[DearDataset, DearDataset, int]:
+    """(training set, validation set, frames skipped) of a profile's data.
+
+    Validation uses fixed misalignments (seed/epoch constant) and crops of the training size.
+    """
+    full = DearDataset(data, profile.crop, profile.augment, profile.norm, profile.seed)
+    train_items, val_items = split_items(full, profile.val_fraction, profile.seed)
+    train = DearDataset(
+        data, profile.crop, profile.augment, profile.norm, profile.seed, train_items
+    )
+    val = DearDataset(
+        data, profile.crop, profile.augment, profile.norm, profile.seed + 1, val_items
+    )
+    return train, val, full.skipped
+
+
+def trains_alignment(profile: Profile) -> bool:
+    """Whether any stage of the profile trains the flow or fusion net (else validation skips
+    them: a refine-only run would spend most of its validation on untrained flow nets)."""
+    return any(s.name != "refine" for s in profile.stages)
+
+
 class Trainer:
     """Trains a :class:`Profile` on capture directories into ``out_dir``.
 
@@ -120,16 +142,7 @@ class Trainer:
         self.dist = distributed.init_from_env()
         self.device = distributed.device_for(self.dist, device)
         torch.manual_seed(profile.seed + self.dist.rank)
-        full = DearDataset(self.data, profile.crop, profile.augment, profile.norm, profile.seed)
-        train_items, val_items = split_items(full, profile.val_fraction, profile.seed)
-        self.skipped = full.skipped
-        self.train_set = DearDataset(
-            self.data, profile.crop, profile.augment, profile.norm, profile.seed, train_items
-        )
-        # Validation: fixed misalignments (seed/epoch constant), centred crops of the same size.
-        self.val_set = DearDataset(
-            self.data, profile.crop, profile.augment, profile.norm, profile.seed + 1, val_items
-        )
+        self.train_set, self.val_set, self.skipped = split_datasets(profile, self.data)
         self.model = build_model(profile).to(self.device)
         self.history: list[dict] = []
         self.position = (0, 0)  # (stage index, next epoch)
@@ -238,6 +251,7 @@ class Trainer:
                         self._loader(self.val_set, shuffle=False),
                         self.device,
                         p.max_val_batches,
+                        align=trains_alignment(p),
                     )
                 entry = {
                     "stage": stage.name,
