@@ -117,11 +117,7 @@ def table_refinement(aligned: dict[str, Report]) -> list[str]:
         if r is None:
             continue
         cells = [fmt(v) for v in r["mae_cm"][:3]] + [fmt(r["mae_all_cm"])]
-        lines.append(
-            f"| {label} | "
-            + " | ".join(cells)
-            + f" | {1e3 * r['median_seconds']:.1f} |"
-        )
+        lines.append(f"| {label} | " + " | ".join(cells) + f" | {1e3 * r['median_seconds']:.1f} |")
     return lines
 
 
@@ -206,7 +202,7 @@ def criterion_seconds(root: Path, name: str) -> tuple[float, float] | None:
     if not path.is_file():
         return None
     sample = json.loads(path.read_text())
-    per_iter = sorted(t / n * 1e-9 for t, n in zip(sample["times"], sample["iters"]))
+    per_iter = sorted(t / n * 1e-9 for t, n in zip(sample["times"], sample["iters"], strict=True))
     return per_iter[len(per_iter) // 2], per_iter[
         min(len(per_iter) - 1, round(0.95 * len(per_iter)))
     ]
@@ -287,9 +283,7 @@ def alignment_paragraph(sets: dict[int, dict[str, Report]]) -> str:
         changes = []
         for s in SIGMAS:
             r = sets[s].get(b, {})
-            changes.append(
-                f"{pct(r.get('aepe_px'), r.get('aepe_rough_px'))} at σ = {s}"
-            )
+            changes.append(f"{pct(r.get('aepe_px'), r.get('aepe_rough_px'))} at σ = {s}")
         parts.append(f"`{b}`: refined vs rough flow AEPE " + ", ".join(changes))
     return (
         f"The paper's flow fusion lowers the AEPE of the rough flow by about "
@@ -313,9 +307,7 @@ def refinement_paragraph(aligned: dict[str, Report]) -> str:
         )
     return (
         f"The paper's ToF-KPN improves on its U-Net by {-100 * PAPER_KPN_VS_UNET:.0f} % MAE "
-        f"(Table 2). On aligned input, MAE all relative to the ToF input: "
-        + "; ".join(parts)
-        + "."
+        f"(Table 2). On aligned input, MAE all relative to the ToF input: " + "; ".join(parts) + "."
     )
 
 
@@ -333,17 +325,13 @@ def whole_paragraph(report: dict[str, Report]) -> str:
     return (
         f"The paper's whole pipeline takes misaligned ToF depth from {raw_paper} to "
         f"{out_paper} cm ({pct(out_paper, raw_paper)}) with its modules trained separately, "
-        f"{oracle_paper} cm after a joint fine-tune. Ours at σ = 4 px: "
-        + "; ".join(parts)
-        + "."
+        f"{oracle_paper} cm after a joint fine-tune. Ours at σ = 4 px: " + "; ".join(parts) + "."
     )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument(
-        "--eval", type=Path, required=True, help="dear eval outputs per set"
-    )
+    parser.add_argument("--eval", type=Path, required=True, help="dear eval outputs per set")
     parser.add_argument("--out", type=Path, required=True, help="RESULTS.md to write")
     parser.add_argument("--figures", type=Path, required=True, help="where figures go")
     parser.add_argument(
@@ -361,9 +349,7 @@ def main() -> None:
     frames = aligned["__file__"]["frames_evaluated"]
     sequence = load(args.eval, "sequence")
     untracked_path = args.eval / "sequence-untracked" / "eval.json"
-    untracked = (
-        load(args.eval, "sequence-untracked") if untracked_path.is_file() else None
-    )
+    untracked = load(args.eval, "sequence-untracked") if untracked_path.is_file() else None
 
     if args.figures.exists():
         shutil.rmtree(args.figures)
@@ -384,7 +370,8 @@ def main() -> None:
             "`dear eval` on each; the numbers below are copied from its `eval.json` files by "
             "`scripts/results.py`). Test sets: "
             f"{frames} frames at 320×240 rendered with seed 9001, and misaligned copies at "
-            "the paper's σ = 2, 4, 6 px (pixels of a 640×480 image; rendered as σ = 1, 2, 3 px at 320×240, seed 4). Every method runs through `dear-pipeline`, the code the "
+            "the paper's σ = 2, 4, 6 px (pixels of a 640×480 image; rendered as σ = 1, 2, 3 px "
+            "at 320×240, seed 4). Every method runs through `dear-pipeline`, the code the "
             "daemon runs; times are medians on the 2-core development machine, tract on one "
             "thread."
         ),
@@ -457,9 +444,7 @@ def main() -> None:
             "geometry, the warps and the confidence map."
         ),
         "",
-        *table_latency(
-            Path("target/criterion/dear_chain_vga"), args.eval / "onnxruntime.json", 30
-        ),
+        *table_latency(Path("target/criterion/dear_chain_vga"), args.eval / "onnxruntime.json", 30),
         "",
         "## The daemon's per-frame latency",
         "",
@@ -474,9 +459,7 @@ def main() -> None:
             '"refine" the confidence map and the edge check.'
         ),
         "",
-        *table_daemon(
-            [args.eval / "deard-bench-vga.json", args.eval / "deard-bench-qvga.json"]
-        ),
+        *table_daemon([args.eval / "deard-bench-vga.json", args.eval / "deard-bench-qvga.json"]),
         "",
     ]
     if args.commentary.is_file():
@@ -486,7 +469,8 @@ def main() -> None:
         "",
         (
             "Panels: RGB | amplitude | ToF depth | result | ground truth | |error| (0–20 cm). "
-            "Blends: depth over RGB before | after alignment. Scan lines: ToF (grey), result (red), "
+            "Blends: depth over RGB before | after alignment. "
+            "Scan lines: ToF (grey), result (red), "
             "ground truth (green) along one row."
         ),
         "",

@@ -11,7 +11,7 @@ echo "== cargo test";   cargo test --workspace
 
 if [ -d train ]; then
     # Two commands, not `a && b`: errexit ignores a failure on the left of `&&`.
-    echo "== ruff";   .venv/bin/ruff check train
-    .venv/bin/ruff format --check train
+    echo "== ruff";   .venv/bin/ruff check train scripts fixtures
+    .venv/bin/ruff format --check train scripts fixtures
     echo "== pytest"; (cd train && ../.venv/bin/python -m pytest -q tests)
 fi
