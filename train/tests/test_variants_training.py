@@ -51,6 +51,10 @@ def test_each_variant_trains_into_its_own_run_on_identical_batches(
         trained = refine_weights(run / "final.pt")
         assert any(not torch.equal(trained[f"refine.{k}"], w) for k, w in init.items())
 
+    # Resuming a finished run trains nothing more and keeps the history.
+    train_side_by_side(TINY, ["gated", "kpn"], [capture_dir], tmp_path / "pair", resume=True)
+    assert len(json.loads((tmp_path / "pair" / "kpn" / "history.json").read_text())) == 2
+
     # The same variant trained alone gets the same batches in the same order, so the same
     # weights: the comparison between variants is not confounded by what each one saw.
     train_side_by_side(TINY, ["gated"], [capture_dir], tmp_path / "alone")
@@ -69,3 +73,21 @@ def test_only_refine_only_profiles_and_distinct_variants(capture_dir: Path, tmp_
     with pytest.raises(SystemExit):
         args = ["--profile", "cpu-gated", "--variants", "kpn", "--variant", "unet"]
         train_main([*args, "--data", str(capture_dir), "--out", str(tmp_path)])
+
+
+def test_an_interrupted_run_resumes_where_it_stopped(capture_dir: Path, tmp_path: Path) -> None:
+    one_epoch = replace(TINY, stages=(Stage("refine", 1, 1e-3),))
+    # Stop after the first of two epochs: a run with one epoch writes last.pt at "stage 1".
+    # Rewrite it as "stage 0, next epoch 1" of the two-epoch profile, what an interrupted
+    # two-epoch run leaves.
+    train_side_by_side(one_epoch, ["gated", "kpn"], [capture_dir], tmp_path / "run")
+    for v in ("gated", "kpn"):
+        path = tmp_path / "run" / v / "checkpoints" / "last.pt"
+        ckpt = load(path)
+        ckpt.update(profile=replace(TINY, variant=v).to_dict(), stage_index=0, next_epoch=1)
+        torch.save(ckpt, path)
+    train_side_by_side(TINY, ["gated", "kpn"], [capture_dir], tmp_path / "run", resume=True)
+    history = json.loads((tmp_path / "run" / "kpn" / "history.json").read_text())
+    assert [h["epoch"] for h in history] == [0, 1]
+    with pytest.raises(FileNotFoundError, match="unet"):
+        train_side_by_side(TINY, ["gated", "unet"], [capture_dir], tmp_path / "run", resume=True)

@@ -63,9 +63,9 @@ def main(argv: list[str] | None = None) -> None:
         data.append(syn)
     profile = get_profile(a.profile, tier=a.tier, variant=a.variant)
     if a.variants:
-        if a.variant or a.resume:
-            p.error("--variants trains from scratch; it takes neither --variant nor --resume")
-        finals = train_side_by_side(profile, a.variants, data, a.out, a.device)
+        if a.variant:
+            p.error("--variants names the variants; it takes no --variant")
+        finals = train_side_by_side(profile, a.variants, data, a.out, a.device, a.resume)
         print(json.dumps({"out": str(a.out), "final_validation": finals}, indent=2))
         return
     metrics = Trainer(profile, data, a.out, a.device, a.resume).run()

@@ -7,9 +7,11 @@ training the variants one after another would decode every batch once per varian
 variant sees the *identical* batches in the identical order — a tighter control than separate
 runs — and the batch is decoded once.
 
-Each variant's result is a normal run directory (``OUT/VARIANT/final.pt`` and
-``history.json``) that ``dear-export --refine-only`` and ``dear-evaluate`` read like any other.
-Only refine-only profiles qualify (the variants differ in the refinement net alone).
+Each variant's result is a normal run directory (``OUT/VARIANT/final.pt``, ``history.json``
+and ``checkpoints/last.pt`` after every epoch) that ``dear-export --refine-only`` and
+``dear-evaluate`` read like any other; ``resume=True`` continues all variants from their
+``last.pt`` (they must stand at the same epoch). Only refine-only profiles qualify (the
+variants differ in the refinement net alone).
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from tqdm import tqdm
 
 from dear_train.evaluation import evaluate
 from dear_train.models.dear import DEAR
-from dear_train.training.checkpoint import build_model, save_atomic
+from dear_train.training.checkpoint import build_model, load, save_atomic
 from dear_train.training.config import Profile
 from dear_train.training.trainer import StageLoss, split_datasets
 
@@ -36,6 +38,7 @@ def train_side_by_side(
     data: list[Path],
     out_dir: Path,
     device: str | None = None,
+    resume: bool = False,
 ) -> dict[str, dict[str, float]]:
     """Train ``variants`` of the profile's refinement net on identical batches.
 
@@ -65,6 +68,23 @@ def train_side_by_side(
                 part.requires_grad_(False)
     losses = {v: StageLoss(models[v], "refine", v) for v in variants}
     history: dict[str, list[dict]] = {v: [] for v in variants}
+    position = (0, 0)  # (stage index, next epoch), shared by every variant
+    saved: dict[str, dict] = {}
+    if resume:
+        for v in variants:
+            last = out_dir / v / "checkpoints" / "last.pt"
+            if not last.exists():
+                raise FileNotFoundError(f"{last}: no checkpoint of variant {v!r} to resume")
+            ckpt = load(last)
+            if ckpt["profile"] != profiles[v].to_dict():
+                raise ValueError(f"{last}: was written by a different profile; use a new --out")
+            models[v].load_state_dict(ckpt["model"])
+            history[v] = ckpt["history"]
+            saved[v] = ckpt
+        positions = {(c["stage_index"], c["next_epoch"]) for c in saved.values()}
+        if len(positions) != 1:
+            raise ValueError(f"{out_dir}: the variants' checkpoints stand at different epochs")
+        position = positions.pop()
 
     def loader(dataset: object, shuffle: bool) -> DataLoader:
         return DataLoader(
@@ -77,6 +97,9 @@ def train_side_by_side(
 
     train_loader = loader(train_set, True)
     for si, stage in enumerate(profile.stages):
+        if si < position[0]:
+            continue
+        first_epoch = position[1] if si == position[0] else 0
         opts = {
             v: torch.optim.Adam(models[v].refine.parameters(), lr=stage.lr)  # type: ignore[union-attr]
             for v in variants
@@ -85,7 +108,11 @@ def train_side_by_side(
             v: torch.optim.lr_scheduler.StepLR(opts[v], profile.lr_decay_every, profile.lr_decay)
             for v in variants
         }
-        for epoch in range(stage.epochs):
+        if saved and first_epoch > 0:
+            for v in variants:
+                opts[v].load_state_dict(saved[v]["optimizer"])
+                scheds[v].load_state_dict(saved[v]["scheduler"])
+        for epoch in range(first_epoch, stage.epochs):
             train_set.set_epoch(epoch + 1000 * si)
             for m in models.values():
                 m.train()
@@ -138,6 +165,20 @@ def train_side_by_side(
                 run = out_dir / v
                 run.mkdir(parents=True, exist_ok=True)
                 (run / "history.json").write_text(json.dumps(history[v], indent=1))
+                done = epoch + 1 == stage.epochs
+                save_atomic(
+                    {
+                        "profile": profiles[v].to_dict(),
+                        "data": [str(d) for d in data],
+                        "model": m.state_dict(),
+                        "stage_index": si + 1 if done else si,
+                        "next_epoch": 0 if done else epoch + 1,
+                        "optimizer": opts[v].state_dict(),
+                        "scheduler": scheds[v].state_dict(),
+                        "history": history[v],
+                    },
+                    run / "checkpoints" / "last.pt",
+                )
     finals = {}
     for v in variants:
         finals[v] = history[v][-1]["val"] if history[v] else {}
