@@ -255,6 +255,7 @@ fn vertical_pass(num: &mut Array2<f32>, den: &mut Array2<f32>, w_v: ArrayView2<f
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::filter::tests::gauss;
     use ndarray::Array3;
 
     const PARAMS: DomainTransformParams = DomainTransformParams {
@@ -269,17 +270,6 @@ mod tests {
         let mut out = Array2::zeros((h, w));
         domain_transform_masked(rgb.view(), depth.view(), params, &mut s, out.view_mut());
         out
-    }
-
-    /// Deterministic approximately Gaussian noise (sum of 4 uniforms, unit variance).
-    fn gauss(i: usize) -> f32 {
-        let u = |k: usize| {
-            let mut x = ((i * 4 + k) as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-            x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            ((x ^ (x >> 31)) >> 40) as f32 / (1u64 << 24) as f32
-        };
-        ((u(0) + u(1) + u(2) + u(3)) - 2.0) * 3.0f32.sqrt()
     }
 
     fn rms(v: impl Iterator<Item = f32>) -> f32 {

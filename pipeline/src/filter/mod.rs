@@ -6,12 +6,14 @@
 //! 2. [`snap`]: each is moved onto the neighbouring surface nearest to its measured depth (a
 //!    mixed pixel is dominated by the surface it mostly sees; choosing the side by colour, as
 //!    [`fill`] does, was measured to be worse, most of all at close range);
-//! 3. [`fill`]: holes are filled from nearby measured pixels of similar colour, never across a
+//! 3. [`outlier`]: an isolated pixel off the surface of its valid 3 × 3 neighbourhood's median
+//!    is replaced by that median (heavy-tailed low-signal noise, which smoothing would spread);
+//! 4. [`fill`]: holes are filled from nearby measured pixels of similar colour, never across a
 //!    depth edge, up to a maximum radius;
-//! 4. [`domain_transform`]: a domain-transform filter guided by the RGB image smooths the depth
+//! 5. [`domain_transform`]: a domain-transform filter guided by the RGB image smooths the depth
 //!    within regions of similar colour, over the valid pixels only (O(N), independent of the
 //!    spatial scale);
-//! 5. [`snap`] again: a smoothed value that lies on no surface measured within a small window
+//! 6. [`snap`] again: a smoothed value that lies on no surface measured within a small window
 //!    (averaging across a depth edge the colour does not show) is replaced by the nearest
 //!    measured surface, so the output contains no mid-air depths.
 //!
@@ -270,7 +272,7 @@ mod tests {
     use ndarray::Array3;
 
     /// Deterministic approximately Gaussian noise (sum of 4 uniforms, unit variance).
-    fn gauss(i: usize) -> f32 {
+    pub(crate) fn gauss(i: usize) -> f32 {
         let u = |k: usize| {
             let mut x = ((i * 4 + k) as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
             x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);

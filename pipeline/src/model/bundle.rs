@@ -200,10 +200,10 @@ fn parse_graph(
         .map(|o| model.outlet_label(*o).unwrap_or("<unnamed>"))
         .collect();
     let output = output_contract(role, spec.apply.as_ref());
-    if labels != [output.0] {
+    if labels != [output.name] {
         return Err(broken(format!(
             "the ONNX graph's outputs are {labels:?}, expected [{:?}]",
-            output.0
+            output.name
         )));
     }
     Ok(LoadedGraph {

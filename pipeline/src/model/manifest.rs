@@ -92,11 +92,31 @@ pub struct RefineApply {
     pub range_scale: f32,
 }
 
-/// The output the chain reads from graph `role`: `(name, channels)`.
-pub(crate) fn output_contract(role: &str, apply: Option<&RefineApply>) -> (&'static str, usize) {
+/// What a graph outputs: its name, channels, and its resolution as a divisor of the input's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct GraphOutput {
+    pub name: &'static str,
+    pub channels: usize,
+    pub stride: usize,
+}
+
+/// The output the chain reads from graph `role` (`apply`: the bundle's refine `apply`, which
+/// only the refine graph's output depends on).
+pub(crate) fn output_contract(role: &str, apply: Option<&RefineApply>) -> GraphOutput {
     match (role, apply) {
-        ("refine", Some(a)) => ("refine_maps", a.channels),
-        _ => contract(role).expect("every role has a contract").output,
+        ("refine", Some(a)) => GraphOutput {
+            name: "refine_maps",
+            channels: a.channels,
+            stride: a.stride,
+        },
+        _ => {
+            let (name, channels) = contract(role).expect("every role has a contract").output;
+            GraphOutput {
+                name,
+                channels,
+                stride: 1,
+            }
+        }
     }
 }
 
@@ -264,7 +284,7 @@ impl Manifest {
         let contract = contract(role).expect("GRAPH_ROLES all have contracts");
         check_tensors(&g.inputs, contract.inputs, "input").map_err(&broken)?;
         let output = output_contract(role, g.apply.as_ref());
-        let out = [(output.0, output.1, true)];
+        let out = [(output.name, output.channels, true)];
         check_tensors(&g.outputs, &out, "output").map_err(&broken)?;
         if role == "refine" {
             let has_rgb = g.inputs.iter().any(|t| t.name == "rgb");

@@ -18,7 +18,7 @@ use crate::frame::Flow;
 use crate::model::bundle::{LoadedGraph, ModelBundle};
 use crate::model::error::BundleError;
 use crate::model::kernel_apply::{apply_gated, GatedKernel};
-use crate::model::manifest::{contract, output_contract};
+use crate::model::manifest::{contract, output_contract, GraphOutput};
 
 /// Largest padded side a runner accepts: beyond it a single plane is gigabytes.
 pub const MAX_SIDE: usize = 16384;
@@ -98,16 +98,7 @@ impl BundleRunner {
         };
         let apply = bundle.refine_apply();
         let build = |role: &str| {
-            let (name, channels) = output_contract(role, apply.filter(|_| role == "refine"));
-            let stride = match (role, apply) {
-                ("refine", Some(a)) => a.stride,
-                _ => 1,
-            };
-            let output = GraphOutput {
-                name,
-                channels,
-                stride,
-            };
+            let output = output_contract(role, apply);
             GraphRunner::new(bundle.graph(role), padded, &run_options, output)
         };
         let refine_tail = apply.map(|a| {
@@ -211,14 +202,6 @@ impl BundleRunner {
             }
         }
     }
-}
-
-/// What a graph outputs: its name, channels, and its resolution as a divisor of the input's.
-#[derive(Debug, Clone, Copy)]
-struct GraphOutput {
-    name: &'static str,
-    channels: usize,
-    stride: usize,
 }
 
 /// The executor of the plans: `None` (the calling thread) or a private pool.
