@@ -301,31 +301,18 @@ def export_bundle(
         check_inputs(profile.variant, norm.max_depth, norm.amplitude_percentile, h, w)
         for h, w in check_sizes
     ]
-    graphs = {}
-    for name, module in modules.items():
-        path = out / specs[name]["file"]
-        export_graph(module, sizes[0][name], specs[name], path)
-        entry = dict(specs[name])
-        if check:
-            entry["check"] = {
-                "runtime": "onnxruntime",
-                "sizes": [list(s) for s in check_sizes],
-                "max_abs_diff": max(
-                    verify_graph(module, s[name], path, specs[name]) for s in sizes
-                ),
-                "tolerance": CHECK_ATOL,
-            }
-        entry["params"] = param_count(module)
-        if macs_at is not None:
-            zeros = _zeros_at(sizes[0][name], macs_at)
-            entry[f"gmac_at_{macs_at[1]}x{macs_at[0]}"] = round(
-                count_macs(module, lambda m=module, z=zeros: m(*z)) / 1e9, 4
-            )
-        entry["bytes"] = path.stat().st_size
-        entry["sha256"] = sha256(path)
-        if name == "refine" and (apply := refine_apply_spec(model.refine)) is not None:
-            entry["apply"] = apply
-        graphs[name] = entry
+    graphs = {
+        name: _export_entry(
+            module,
+            specs[name],
+            [s[name] for s in sizes],
+            out / specs[name]["file"],
+            check_sizes if check else None,
+            macs_at,
+            refine_apply_spec(model.refine) if name == "refine" else None,
+        )
+        for name, module in modules.items()
+    }
     manifest = {
         "format": FORMAT,
         "format_version": format_version(profile.variant),
@@ -392,27 +379,15 @@ def export_refine_into(
         check_inputs(profile.variant, norm.max_depth, norm.amplitude_percentile, h, w)["refine"]
         for h, w in check_sizes
     ]
-    path = bundle / spec["file"]
-    export_graph(module, sizes[0], spec, path)
-    entry = dict(spec)
-    if check:
-        entry["check"] = {
-            "runtime": "onnxruntime",
-            "sizes": [list(s) for s in check_sizes],
-            "max_abs_diff": max(verify_graph(module, x, path, spec) for x in sizes),
-            "tolerance": CHECK_ATOL,
-        }
-    entry["params"] = param_count(module)
-    if macs_at is not None:
-        zeros = _zeros_at(sizes[0], macs_at)
-        entry[f"gmac_at_{macs_at[1]}x{macs_at[0]}"] = round(
-            count_macs(module, lambda: module(*zeros)) / 1e9, 4
-        )
-    entry["bytes"] = path.stat().st_size
-    entry["sha256"] = sha256(path)
-    if (apply := refine_apply_spec(model.refine)) is not None:
-        entry["apply"] = apply
-    manifest["graphs"]["refine"] = entry
+    manifest["graphs"]["refine"] = _export_entry(
+        module,
+        spec,
+        sizes,
+        bundle / spec["file"],
+        check_sizes if check else None,
+        macs_at,
+        refine_apply_spec(model.refine),
+    )
     manifest["variant"] = profile.variant
     manifest["format_version"] = format_version(profile.variant)
     manifest.setdefault("training", {})["refine"] = {
@@ -422,6 +397,43 @@ def export_refine_into(
     manifest.setdefault("validation", {})["refine"] = (extra or {}).get("validation", {})
     manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
     return manifest
+
+
+def _export_entry(
+    module: nn.Module,
+    spec: dict,
+    inputs: list[tuple],
+    path: Path,
+    check_sizes: tuple[tuple[int, int], ...] | None,
+    macs_at: tuple[int, int] | None,
+    apply: dict | None,
+) -> dict:
+    """Export one graph to ``path`` and return its manifest entry.
+
+    ``inputs``: the graph's example inputs at each size (the first is traced; with
+    ``check_sizes`` every one is compared with onnxruntime); ``macs_at``: ``(H, W)`` of the MAC
+    count; ``apply``: the refine graph's format-2 ``apply`` record, if any.
+    """
+    export_graph(module, inputs[0], spec, path)
+    entry = dict(spec)
+    if check_sizes is not None:
+        entry["check"] = {
+            "runtime": "onnxruntime",
+            "sizes": [list(s) for s in check_sizes],
+            "max_abs_diff": max(verify_graph(module, x, path, spec) for x in inputs),
+            "tolerance": CHECK_ATOL,
+        }
+    entry["params"] = param_count(module)
+    if macs_at is not None:
+        zeros = _zeros_at(inputs[0], macs_at)
+        entry[f"gmac_at_{macs_at[1]}x{macs_at[0]}"] = round(
+            count_macs(module, lambda: module(*zeros)) / 1e9, 4
+        )
+    entry["bytes"] = path.stat().st_size
+    entry["sha256"] = sha256(path)
+    if apply is not None:
+        entry["apply"] = apply
+    return entry
 
 
 def _zeros_at(inputs: tuple, size: tuple[int, int]) -> tuple:

@@ -43,6 +43,57 @@ def load(path: Path) -> dict:
     return torch.load(path, map_location="cpu", weights_only=False)
 
 
+def training_state(
+    profile: Profile,
+    data: list[Path],
+    model: DEAR,
+    stage_index: int,
+    next_epoch: int,
+    optimizer: dict,
+    scheduler: dict,
+    history: list[dict],
+) -> dict:
+    """The contents of ``last.pt``: everything a run needs to resume at ``(stage, epoch)``."""
+    return {
+        "profile": profile.to_dict(),
+        "data": [str(d) for d in data],
+        "model": model.state_dict(),
+        "stage_index": stage_index,
+        "next_epoch": next_epoch,
+        "optimizer": optimizer,
+        "scheduler": scheduler,
+        "history": history,
+    }
+
+
+def final_state(
+    profile: Profile,
+    data: list[Path],
+    model: DEAR,
+    frames: dict[str, int],
+    history: list[dict],
+    **extra: object,
+) -> dict:
+    """The contents of ``final.pt``; its ``metrics`` are the last epoch's validation."""
+    return {
+        "profile": profile.to_dict(),
+        "data": [str(d) for d in data],
+        "frames": frames,
+        "model": model.state_dict(),
+        "metrics": history[-1]["val"] if history else {},
+        "history": history,
+        **extra,
+    }
+
+
+def load_resumable(path: Path, profile: Profile) -> dict:
+    """``last.pt`` of a run of ``profile``; refuses one written by another profile."""
+    ckpt = load(path)
+    if ckpt["profile"] != profile.to_dict():
+        raise ValueError(f"{path}: was written by a different profile; use a new --out")
+    return ckpt
+
+
 def load_model(path: Path) -> tuple[DEAR, Profile]:
     """The trained model and its profile from ``final.pt`` or ``last.pt``."""
     ckpt = load(path)

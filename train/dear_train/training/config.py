@@ -82,6 +82,23 @@ class Profile:
         )
 
 
+# The shipped edge refiner: the ``gated`` variant trained on its own (the bundle keeps its
+# flow graphs; ``dear-export --refine-only``) on the ``train`` family of dear-synth
+# (synth/src/family.rs), ≈ 35 min on 2 idle CPU cores (models/edge/README.md).
+CPU_GATED = Profile(
+    name="cpu-gated",
+    tier="edge",
+    variant="gated",
+    crop=(192, 256),
+    batch_size=4,
+    stages=(Stage("refine", 10, 1e-3),),
+    lr_decay_every=3,
+    max_steps_per_epoch=300,
+    max_val_batches=30,
+    val_fraction=0.05,
+    num_workers=1,
+)
+
 PROFILES: dict[str, Profile] = {
     "smoke": Profile(
         name="smoke",
@@ -117,37 +134,13 @@ PROFILES: dict[str, Profile] = {
         max_val_batches=20,
         num_workers=1,
     ),
-    # The shipped edge refiner: the ``gated`` variant trained on its own (the bundle keeps its
-    # flow graphs; ``dear-export --refine-only``) on the ``train`` family of dear-synth
-    # (synth/src/family.rs), ≈ 35 min on 2 idle CPU cores (models/edge/README.md).
-    "cpu-gated": Profile(
-        name="cpu-gated",
-        tier="edge",
-        variant="gated",
-        crop=(192, 256),
-        batch_size=4,
-        stages=(Stage("refine", 10, 1e-3),),
-        lr_decay_every=3,
-        max_steps_per_epoch=300,
-        max_val_batches=30,
-        val_fraction=0.05,
-        num_workers=1,
-    ),
+    "cpu-gated": CPU_GATED,
     # The paper's ablation rows (Tables 2/3) and the shipped variant, trained side by side on
     # identical batches (``dear-train --variants``): cpu-gated's data, crops and optimiser on a
-    # 4-epoch schedule, so that six variants train in well under an hour on 2 idle cores.
-    "cpu-ablation": Profile(
-        name="cpu-ablation",
-        tier="edge",
-        variant="gated",
-        crop=(192, 256),
-        batch_size=4,
-        stages=(Stage("refine", 4, 1e-3),),
-        lr_decay_every=2,
-        max_steps_per_epoch=300,
-        max_val_batches=30,
-        val_fraction=0.05,
-        num_workers=1,
+    # 4-epoch schedule (six variants: about 20 min per epoch while builds shared the 2 cores;
+    # an estimated 5 min idle).
+    "cpu-ablation": replace(
+        CPU_GATED, name="cpu-ablation", stages=(Stage("refine", 4, 1e-3),), lr_decay_every=2
     ),
     "gpu": Profile(
         name="gpu",

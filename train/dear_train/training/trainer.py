@@ -9,7 +9,7 @@ from pathlib import Path
 import torch
 from torch import nn
 from torch.nn.parallel import DistributedDataParallel
-from torch.utils.data import DataLoader, DistributedSampler
+from torch.utils.data import DataLoader, DistributedSampler, Sampler
 from tqdm import tqdm
 
 from dear_train.data.dataset import DearDataset, split_items
@@ -24,7 +24,13 @@ from dear_train.losses import (
 )
 from dear_train.models.dear import DEAR
 from dear_train.training import distributed
-from dear_train.training.checkpoint import build_model, load, save_atomic
+from dear_train.training.checkpoint import (
+    build_model,
+    final_state,
+    load_resumable,
+    save_atomic,
+    training_state,
+)
 from dear_train.training.config import Profile
 from dear_train.training.curves import plot_history
 
@@ -115,6 +121,22 @@ def split_datasets(profile: Profile, data: list[Path]) -> tuple[DearDataset, Dea
     return train, val, full.skipped
 
 
+def data_loader(
+    dataset: DearDataset, profile: Profile, shuffle: bool, sampler: Sampler | None = None
+) -> DataLoader:
+    """Batches of ``dataset`` for a profile: shuffled and without a ragged last batch for
+    training, in order and complete for validation (``sampler`` replaces the shuffle)."""
+    return DataLoader(
+        dataset,
+        batch_size=profile.batch_size,
+        shuffle=shuffle and sampler is None,
+        sampler=sampler,
+        num_workers=profile.num_workers,
+        drop_last=shuffle and len(dataset) >= profile.batch_size,
+        persistent_workers=False,
+    )
+
+
 def trains_alignment(profile: Profile) -> bool:
     """Whether any stage of the profile trains the flow or fusion net (else validation skips
     them: a refine-only run would spend most of its validation on untrained flow nets)."""
@@ -149,9 +171,7 @@ class Trainer:
         self.resume_state: dict | None = None
         last = self.out / "checkpoints" / "last.pt"
         if resume and last.exists():
-            ckpt = load(last)
-            if ckpt["profile"] != profile.to_dict():
-                raise ValueError(f"{last}: was written by a different profile; use a new --out")
+            ckpt = load_resumable(last, profile)
             self.model.load_state_dict(ckpt["model"])
             self.history = ckpt["history"]
             self.position = (ckpt["stage_index"], ckpt["next_epoch"])
@@ -163,30 +183,22 @@ class Trainer:
             if self.dist.enabled
             else None
         )
-        return DataLoader(
-            dataset,
-            batch_size=self.profile.batch_size,
-            shuffle=shuffle and sampler is None,
-            sampler=sampler,
-            num_workers=self.profile.num_workers,
-            drop_last=shuffle and len(dataset) >= self.profile.batch_size,
-            persistent_workers=False,
-        )
+        return data_loader(dataset, self.profile, shuffle, sampler)
 
     def _save(self, path: Path, stage_index: int, next_epoch: int, opt: dict, sched: dict) -> None:
         if not self.dist.is_main:
             return
         save_atomic(
-            {
-                "profile": self.profile.to_dict(),
-                "data": [str(d) for d in self.data],
-                "model": self.model.state_dict(),
-                "stage_index": stage_index,
-                "next_epoch": next_epoch,
-                "optimizer": opt,
-                "scheduler": sched,
-                "history": self.history,
-            },
+            training_state(
+                self.profile,
+                self.data,
+                self.model,
+                stage_index,
+                next_epoch,
+                opt,
+                sched,
+                self.history,
+            ),
             path,
         )
 
@@ -277,22 +289,14 @@ class Trainer:
             if main:
                 self._save(self.out / "checkpoints" / f"stage-{stage.name}.pt", si + 1, 0, {}, {})
             distributed.barrier(self.dist)
-        final = self.history[-1]["val"] if self.history else {}
+        state = final_state(
+            self.profile,
+            self.data,
+            self.model,
+            {"train": len(self.train_set), "val": len(self.val_set), "skipped": self.skipped},
+            self.history,
+        )
         if main:
-            save_atomic(
-                {
-                    "profile": self.profile.to_dict(),
-                    "data": [str(d) for d in self.data],
-                    "frames": {
-                        "train": len(self.train_set),
-                        "val": len(self.val_set),
-                        "skipped": self.skipped,
-                    },
-                    "model": self.model.state_dict(),
-                    "metrics": final,
-                    "history": self.history,
-                },
-                self.out / "final.pt",
-            )
+            save_atomic(state, self.out / "final.pt")
         distributed.shutdown(self.dist)
-        return final
+        return state["metrics"]

@@ -16,20 +16,27 @@ variants differ in the refinement net alone).
 
 from __future__ import annotations
 
+import itertools
 import json
 import time
 from dataclasses import replace
 from pathlib import Path
 
 import torch
-from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from dear_train.evaluation import evaluate
 from dear_train.models.dear import DEAR
-from dear_train.training.checkpoint import build_model, load, save_atomic
+from dear_train.training import distributed
+from dear_train.training.checkpoint import (
+    build_model,
+    final_state,
+    load_resumable,
+    save_atomic,
+    training_state,
+)
 from dear_train.training.config import Profile
-from dear_train.training.trainer import StageLoss, split_datasets
+from dear_train.training.trainer import StageLoss, data_loader, split_datasets
 
 
 def train_side_by_side(
@@ -51,7 +58,7 @@ def train_side_by_side(
             f"profile {profile.name!r} trains {[s.name for s in profile.stages]}; "
             "side-by-side training needs a refine-only profile (e.g. cpu-gated)"
         )
-    dev = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    dev = distributed.device_for(distributed.DistInfo(), device)
     data = [Path(d) for d in data]
     out_dir = Path(out_dir)
     torch.manual_seed(profile.seed)
@@ -72,12 +79,7 @@ def train_side_by_side(
     saved: dict[str, dict] = {}
     if resume:
         for v in variants:
-            last = out_dir / v / "checkpoints" / "last.pt"
-            if not last.exists():
-                raise FileNotFoundError(f"{last}: no checkpoint of variant {v!r} to resume")
-            ckpt = load(last)
-            if ckpt["profile"] != profiles[v].to_dict():
-                raise ValueError(f"{last}: was written by a different profile; use a new --out")
+            ckpt = load_resumable(out_dir / v / "checkpoints" / "last.pt", profiles[v])
             models[v].load_state_dict(ckpt["model"])
             history[v] = ckpt["history"]
             saved[v] = ckpt
@@ -86,16 +88,12 @@ def train_side_by_side(
             raise ValueError(f"{out_dir}: the variants' checkpoints stand at different epochs")
         position = positions.pop()
 
-    def loader(dataset: object, shuffle: bool) -> DataLoader:
-        return DataLoader(
-            dataset,  # type: ignore[arg-type]
-            batch_size=profile.batch_size,
-            shuffle=shuffle,
-            num_workers=profile.num_workers,
-            drop_last=shuffle,
-        )
-
-    train_loader = loader(train_set, True)
+    train_loader = data_loader(train_set, profile, shuffle=True)
+    # The validation batches are fixed (constant seed, no epoch): decode them once for every
+    # variant and epoch.
+    val_batches = list(
+        itertools.islice(data_loader(val_set, profile, shuffle=False), profile.max_val_batches)
+    )
     for si, stage in enumerate(profile.stages):
         if si < position[0]:
             continue
@@ -144,11 +142,7 @@ def train_side_by_side(
                 m = models[v]
                 # Validation of the refinement alone, at the true flow.
                 val = evaluate(
-                    DEAR(None, None, m.refine, m.max_depth),
-                    loader(val_set, False),
-                    dev,
-                    profile.max_val_batches,
-                    align=False,
+                    DEAR(None, None, m.refine, m.max_depth), val_batches, dev, align=False
                 )
                 entry = {
                     "stage": stage.name,
@@ -167,31 +161,24 @@ def train_side_by_side(
                 (run / "history.json").write_text(json.dumps(history[v], indent=1))
                 done = epoch + 1 == stage.epochs
                 save_atomic(
-                    {
-                        "profile": profiles[v].to_dict(),
-                        "data": [str(d) for d in data],
-                        "model": m.state_dict(),
-                        "stage_index": si + 1 if done else si,
-                        "next_epoch": 0 if done else epoch + 1,
-                        "optimizer": opts[v].state_dict(),
-                        "scheduler": scheds[v].state_dict(),
-                        "history": history[v],
-                    },
+                    training_state(
+                        profiles[v],
+                        data,
+                        m,
+                        si + 1 if done else si,
+                        0 if done else epoch + 1,
+                        opts[v].state_dict(),
+                        scheds[v].state_dict(),
+                        history[v],
+                    ),
                     run / "checkpoints" / "last.pt",
                 )
+    frames = {"train": len(train_set), "val": len(val_set), "skipped": skipped}
     finals = {}
     for v in variants:
-        finals[v] = history[v][-1]["val"] if history[v] else {}
-        save_atomic(
-            {
-                "profile": profiles[v].to_dict(),
-                "data": [str(d) for d in data],
-                "frames": {"train": len(train_set), "val": len(val_set), "skipped": skipped},
-                "model": models[v].state_dict(),
-                "metrics": finals[v],
-                "history": history[v],
-                "trained_with": sorted(variants),
-            },
-            out_dir / v / "final.pt",
+        state = final_state(
+            profiles[v], data, models[v], frames, history[v], trained_with=sorted(variants)
         )
+        save_atomic(state, out_dir / v / "final.pt")
+        finals[v] = state["metrics"]
     return finals
