@@ -155,6 +155,7 @@ fn bench(c: &mut Criterion) {
                         amp_w.view(),
                         depth_w.view(),
                         Some([planes[0].view(), planes[1].view(), planes[2].view()]),
+                        None,
                         depth_out.view_mut(),
                     )
                     .unwrap();

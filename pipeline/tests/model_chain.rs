@@ -244,6 +244,7 @@ fn each_network_matches_pytorch_on_pytorch_inputs() {
             p.plane("amplitude_warped", 0),
             p.plane("depth_warped", 0),
             Some([rgb[0].view(), rgb[1].view(), rgb[2].view()]),
+            None,
             depth.view_mut(),
         )
         .unwrap();

@@ -72,6 +72,7 @@ fn gated_refiner_through_tract_and_the_rust_tail_equals_pytorch() {
             amp.view(),
             depth.view(),
             Some([rgb[0].view(), rgb[1].view(), rgb[2].view()]),
+            None,
             out.view_mut(),
         )
         .unwrap();
@@ -94,10 +95,18 @@ type Edit = Box<dyn Fn(&mut serde_json::Value)>;
 
 #[test]
 fn malformed_apply_entries_are_refused_by_name() {
-    let cases: [(&str, Edit); 5] = [
+    let cases: [(&str, Edit); 7] = [
         (
             "apply.kind \"sharpen\"",
             Box::new(|m| m["graphs"]["refine"]["apply"]["kind"] = "sharpen".into()),
+        ),
+        (
+            "a hybrid-kernel head has 13",
+            Box::new(|m| m["graphs"]["refine"]["apply"]["kind"] = "hybrid-kernel".into()),
+        ),
+        (
+            "apply.jump_scale belongs to \"hybrid-kernel\" only",
+            Box::new(|m| m["graphs"]["refine"]["apply"]["jump_scale"] = 300.0.into()),
         ),
         (
             "apply.stride 3",

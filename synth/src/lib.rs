@@ -10,11 +10,14 @@
 //! - [`sensor`]: 4-tap correlation, shot/read noise, demodulation, unwrapping, radial → z;
 //! - [`simulate`]: one aligned sample from a scene;
 //! - [`dataset`]: writing capture directories (`generate`);
+//! - [`classical`]: the classical refiner's output beside each frame, for training refiners
+//!   that take it (`classical`);
 //! - [`family`]: training and held-out families of sensor and scene settings (`family`);
 //! - [`perturb`]: misaligned test/training sets with ground-truth flow;
 //! - [`sequence`]: moving scenes with drifting calibration;
 //! - [`preview`]: colour maps and the preview panel.
 
+pub mod classical;
 pub mod dataset;
 pub mod family;
 pub mod geometry;

@@ -54,6 +54,13 @@ enum Command {
         #[arg(long, default_value_t = 240)]
         height: usize,
     },
+    /// Write the daemon's classical refiner output beside every frame of a capture
+    /// (`frames/NNNNNN.classical.png`): the extra training input of `hybrid` refiners.
+    Classical {
+        /// Capture directories (e.g. every shard of a family).
+        #[arg(long, required = true, num_args = 1..)]
+        capture: Vec<PathBuf>,
+    },
     /// Misalign an aligned capture: new RGB view, GT depth, mask and flow per frame.
     Perturb {
         #[arg(long = "in")]
@@ -285,6 +292,24 @@ fn main() -> Result<()> {
             generate_sequence(&common.out, &params, |i| pb.set_position(i as u64))?;
             pb.finish();
             report("sequence", frames, start, common.width, common.height);
+        }
+        Command::Classical { capture } => {
+            let start = Instant::now();
+            let mut total = 0;
+            for dir in &capture {
+                let frames = CaptureDir::open(dir)
+                    .with_context(|| format!("opening {}", dir.display()))?
+                    .len();
+                let pb = bar(frames, &format!("classical {}", dir.display()));
+                total += dear_synth::classical::write_classical_planes(dir, |n| {
+                    pb.set_position(n as u64)
+                })?;
+                pb.finish();
+            }
+            eprintln!(
+                "classical: {total} frames in {:.1} s",
+                start.elapsed().as_secs_f64()
+            );
         }
         Command::Preview {
             capture,

@@ -101,7 +101,7 @@ def evaluate(
         acc["mae_input_misaligned"].add(tof, aligned, gt, valid)
         acc["mae_input_aligned"].add(aligned, aligned, gt, valid)
         if model.refine is not None:
-            r = model.refine_depth(rgb, amp, tof, b["flow"])
+            r = model.refine_depth(rgb, amp, tof, b["flow"], b.get("tof_classical"))
             acc["mae_refined_gtflow"].add(r["depth"], aligned, gt, valid)
         if align and model.flow is not None:
             out = model.align(rgb, amp, tof)
@@ -110,7 +110,13 @@ def evaluate(
                 flows["aepe_refined"].append(float(epe(out["flow_refn"], b["flow"], valid)))
             if model.refine is not None:
                 final = out.get("flow_refn", out["flow_rough"])
-                r = model.refine_depth(rgb, amp, tof, final)  # type: ignore[arg-type]
+                r = model.refine_depth(
+                    rgb,
+                    amp,
+                    tof,
+                    final,  # type: ignore[arg-type]
+                    b.get("tof_classical"),
+                )
                 acc["mae_pipeline"].add(r["depth"], aligned, gt, valid)
     model.train(was_training)
     metrics: dict[str, float] = {k: float(np.mean(v)) for k, v in flows.items() if v}
@@ -125,6 +131,7 @@ def main(argv: list[str] | None = None) -> None:
     from torch.utils.data import DataLoader
 
     from dear_train.data.dataset import DearDataset
+    from dear_train.models.kpn import uses_classical
     from dear_train.training.checkpoint import load_model
 
     p = argparse.ArgumentParser(description="Evaluate a trained DEAR checkpoint on captures.")
@@ -135,7 +142,14 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--out", type=Path, default=None, help="also write the metrics JSON here")
     a = p.parse_args(argv)
     model, profile = load_model(a.checkpoint)
-    ds = DearDataset(a.data, crop=None, augment=profile.augment, norm=profile.norm, seed=a.seed)
+    ds = DearDataset(
+        a.data,
+        crop=None,
+        augment=profile.augment,
+        norm=profile.norm,
+        seed=a.seed,
+        classical=uses_classical(profile.variant),
+    )
     loader = DataLoader(ds, batch_size=1, shuffle=False)
     metrics = evaluate(model, loader, "cpu", a.max_frames)
     metrics["frames_skipped"] = ds.skipped

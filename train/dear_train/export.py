@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import onnx
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 import dear_train
@@ -69,13 +70,13 @@ class FuseGraph(nn.Module):
 
 
 class RefineGraph(nn.Module):
-    """``(amplitude, depth[, rgb])`` → refined depth, depths in metres.
+    """``(amplitude, depth[, rgb][, classical])`` → refined depth, depths in metres.
 
     The ``/ max_depth`` and ``× max_depth`` around the network are part of the graph, so the
     daemon passes and receives metres and cannot get the depth scaling wrong.
 
-    For the ``gated`` variant (format version 2) the graph ends at the head: it outputs the 12
-    maps at 1/``stride`` resolution and the daemon upsamples and applies them
+    For the ``gated`` and ``hybrid`` variants (format version 2) the graph ends at the head: it
+    outputs the maps at 1/``stride`` resolution and the daemon upsamples and applies them
     (``pipeline/src/model/kernel_apply.rs``, described by ``graphs.refine.apply``): tract runs
     that full-resolution tail op by op at several times its arithmetic cost (its ``Softmax``
     alone took ~0.8 s per 640×480 frame).
@@ -87,36 +88,62 @@ class RefineGraph(nn.Module):
         self.max_depth = max_depth
 
     def forward(
-        self, amplitude: torch.Tensor, depth: torch.Tensor, rgb: torch.Tensor | None = None
+        self,
+        amplitude: torch.Tensor,
+        depth: torch.Tensor,
+        rgb: torch.Tensor | None = None,
+        classical: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        if self.net.variant == "gated":
-            return self.net.gated_maps(amplitude, depth / self.max_depth, rgb)
+        c = None if classical is None else classical / self.max_depth
+        if kpn.applies_maps(self.net.variant):
+            return self.net.head_maps(amplitude, depth / self.max_depth, rgb, c)
         return self.net(amplitude, depth / self.max_depth, rgb) * self.max_depth
 
 
 def format_version(variant: str) -> int:
-    """Bundle format: 2 when the daemon applies the refiner's output (``gated``), else 1."""
-    return 2 if variant == "gated" else 1
+    """Bundle format: 2 when the daemon applies the refiner's output (``gated``, ``hybrid``),
+    else 1."""
+    return 2 if kpn.applies_maps(variant) else 1
+
+
+_GATED_DEFINITION = (
+    "for the 3x3 neighbours b_i of b (edges replicated) w = softmax_i(maps[i] - range_scale * "
+    "exp(maps[11]) * |b_i - b|) over neighbours with b_i > 0; out = b + sigmoid(maps[10]) * "
+    "(sum w_i b_i + max_bias * tanh(maps[9]) - b), 0 where b = 0; metres = out * max_depth_m"
+)
 
 
 def refine_apply_spec(net: RefineNet) -> dict | None:
     """``graphs.refine.apply``: what the daemon does with a format-2 refine graph's maps."""
-    if net.variant != "gated":
+    upsample = (
+        "maps upsampled bilinearly (half-pixel centres, edges clamped) to the depth grid and "
+        "cropped; "
+    )
+    if net.variant == "gated":
+        kind, channels = "gated-kernel", kpn.GATED_CHANNELS
+        definition = upsample + "b = depth / max_depth_m; " + _GATED_DEFINITION
+    elif net.variant == "hybrid":
+        kind, channels = "hybrid-kernel", kpn.HYBRID_CHANNELS
+        definition = (
+            upsample
+            + "d = depth / max_depth_m, c = classical / max_depth_m (the classical refiner's "
+            "output on the warped depth); t = sigmoid(maps[12] + jump_scale * |c - d|); b = d "
+            "+ t * (c - d) where d > 0 and c > 0, d where only d > 0, c where only c > 0; "
+            + _GATED_DEFINITION
+        )
+    else:
         return None
-    return {
-        "kind": "gated-kernel",
+    spec = {
+        "kind": kind,
         "stride": net.backbone.stride,
-        "channels": kpn.GATED_CHANNELS,
+        "channels": channels,
         "max_bias": kpn.GATED_MAX_BIAS,
         "range_scale": kpn.GATED_RANGE_SCALE,
-        "definition": (
-            "maps upsampled bilinearly (half-pixel centres, edges clamped) to the depth grid "
-            "and cropped; d = depth / max_depth_m; for the 3x3 neighbours d_i (edges "
-            "replicated) w = softmax_i(maps[i] - range_scale * exp(maps[11]) * |d_i - d|) over "
-            "neighbours with d_i > 0; out = d + sigmoid(maps[10]) * (sum w_i d_i + max_bias * "
-            "tanh(maps[9]) - d), 0 where d = 0; metres = out * max_depth_m"
-        ),
     }
+    if net.variant == "hybrid":
+        spec["jump_scale"] = kpn.HYBRID_JUMP_SCALE
+    spec["definition"] = definition
+    return spec
 
 
 def _tensor_io(name: str, channels: int, meaning: str) -> dict:
@@ -148,6 +175,16 @@ def graph_specs(variant: str) -> dict[str, dict]:
     ]
     if uses_rgb(variant):
         refine_inputs.append(rgb)
+    if kpn.uses_classical(variant):
+        refine_inputs.append(
+            _tensor_io(
+                "classical",
+                1,
+                "the daemon's classical refiner (pipeline/src/filter) run on the warped depth, "
+                "guided by the RGB image, metres; 0 = invalid",
+            )
+        )
+    maps_channels = kpn.head_channels(variant)
     return {
         "flow": {
             "file": "flow.onnx",
@@ -190,13 +227,15 @@ def graph_specs(variant: str) -> dict[str, dict]:
                 {
                     **_tensor_io(
                         "refine_maps",
-                        kpn.GATED_CHANNELS,
-                        "kernel logits (9), bias, gate and range log-sharpness at 1/stride "
-                        "resolution; applied by the daemon as graphs.refine.apply says",
+                        maps_channels,
+                        "kernel logits (9), bias, gate and range log-sharpness"
+                        + (", trust in the classical estimate" if variant == "hybrid" else "")
+                        + " at 1/stride resolution; applied by the daemon as "
+                        "graphs.refine.apply says",
                     ),
-                    "shape": ["N", kpn.GATED_CHANNELS, "H/4", "W/4"],
+                    "shape": ["N", maps_channels, "H/4", "W/4"],
                 }
-                if variant == "gated"
+                if kpn.applies_maps(variant)
                 else _tensor_io("depth_refined", 1, "refined depth on the RGB grid, metres")
             ],
         },
@@ -214,6 +253,11 @@ def check_inputs(variant: str, max_depth: float, percentile: float, h: int, w: i
     yy, xx = torch.meshgrid(torch.arange(h) / h, torch.arange(w) / w, indexing="ij")
     flow = torch.stack([6 * torch.sin(3 * xx) - 2, 4 * torch.cos(2 * yy) + 1])[None]
     refine = (amp, depth, rgb) if uses_rgb(variant) else (amp, depth)
+    if kpn.uses_classical(variant):
+        # Any depth-like plane checks the graph; a smoothed depth with its holes filled by
+        # neighbours stands for the classical filter's output.
+        filled = torch.where(depth > 0, depth, F.max_pool2d(depth, 5, 1, 2))
+        refine = (*refine, F.avg_pool2d(filled, 3, 1, 1, count_include_pad=False))
     return {"flow": (rgb, amp), "fuse": (flow, flow + 0.5 * torch.sin(7 * xx)), "refine": refine}
 
 
@@ -441,11 +485,35 @@ def _zeros_at(inputs: tuple, size: tuple[int, int]) -> tuple:
     return tuple(torch.zeros(x.shape[0], x.shape[1], *size) for x in inputs)
 
 
+def recipe_record(ckpt: dict) -> dict:
+    """What ``model.json`` records of the run behind a checkpoint: data, frames, epochs trained
+    and the last validation.
+
+    ``final.pt`` carries its metrics; a ``last.pt`` (a run stopped early, e.g. for time) only
+    its history, so the last epoch's validation is taken from there and ``epochs_trained``
+    says how far the run got, instead of leaving the schedule in the profile to speak for it.
+    """
+    history = ckpt.get("history", [])
+    return {
+        "training": {
+            "data": ckpt.get("data", []),
+            "frames": ckpt.get("frames", {}),
+            "epochs_trained": len(history),
+            "from": "final.pt"
+            if "metrics" in ckpt
+            else "last.pt (stopped before the schedule ended)",
+        },
+        "validation": ckpt.get("metrics", history[-1]["val"] if history else {}),
+    }
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(
         prog="dear-export", description="Export a trained DEAR checkpoint to a model bundle."
     )
-    p.add_argument("--checkpoint", type=Path, required=True, help="final.pt of a training run")
+    p.add_argument(
+        "--checkpoint", type=Path, required=True, help="final.pt (or last.pt) of a training run"
+    )
     p.add_argument("--out", type=Path, required=True, help="bundle directory to write")
     p.add_argument("--no-check", action="store_true", help="skip the onnxruntime comparison")
     p.add_argument(
@@ -455,11 +523,7 @@ def main(argv: list[str] | None = None) -> None:
     )
     a = p.parse_args(argv)
     model, profile = load_model(a.checkpoint)
-    ckpt = load(a.checkpoint)
-    extra = {
-        "training": {"data": ckpt.get("data", []), "frames": ckpt.get("frames", {})},
-        "validation": ckpt.get("metrics", {}),
-    }
+    extra = recipe_record(load(a.checkpoint))
     if a.refine_only:
         manifest = export_refine_into(model, profile, a.out, extra, check=not a.no_check)
     else:

@@ -17,7 +17,7 @@ from dear_train.training.checkpoint import build_model
 from dear_train.training.config import get_profile
 
 
-@pytest.mark.parametrize("variant", ["kpn", "norgb", "gated"])
+@pytest.mark.parametrize("variant", ["kpn", "norgb", "gated", "hybrid"])
 def test_edge_bundle_round_trip(tmp_path: Path, variant: str) -> None:
     profile = get_profile("smoke", variant=variant)
     model = build_model(profile).eval()
@@ -31,7 +31,8 @@ def test_edge_bundle_round_trip(tmp_path: Path, variant: str) -> None:
     ]  # one file per graph: no external .onnx.data
     on_disk = json.loads((out / "model.json").read_text())
     assert on_disk == json.loads(json.dumps(manifest))
-    assert on_disk["format_version"] == (2 if variant == "gated" else 1)
+    maps = variant in ("gated", "hybrid")
+    assert on_disk["format_version"] == (2 if maps else 1)
     assert on_disk["tier"] == "edge"
     assert on_disk["normalisation"]["max_depth_m"] == 10.0
     assert on_disk["validation"] == {"x": 1.0}
@@ -45,7 +46,10 @@ def test_edge_bundle_round_trip(tmp_path: Path, variant: str) -> None:
         assert [i.name for i in graph.graph.input] == [i["name"] for i in g["inputs"]]
     refine_inputs = [i["name"] for i in on_disk["graphs"]["refine"]["inputs"]]
     with_rgb = variant != "norgb"
-    assert refine_inputs == ["amplitude", "depth"] + (["rgb"] if with_rgb else [])
+    hybrid = variant == "hybrid"
+    assert refine_inputs == ["amplitude", "depth"] + (["rgb"] if with_rgb else []) + (
+        ["classical"] if hybrid else []
+    )
 
     # Independently of export_bundle's own check: refine.onnx takes and returns metres.
     sess = ort.InferenceSession(str(out / "refine.onnx"), providers=["CPUExecutionProvider"])
@@ -53,17 +57,25 @@ def test_edge_bundle_round_trip(tmp_path: Path, variant: str) -> None:
     amp = rng.random((1, 1, 40, 48), dtype=np.float32)
     depth = (1 + 3 * rng.random((1, 1, 40, 48))).astype(np.float32)
     rgb = rng.random((1, 3, 40, 48), dtype=np.float32)
-    feed = {"amplitude": amp, "depth": depth} | ({"rgb": rgb} if with_rgb else {})
+    classical = (depth + 0.01).astype(np.float32)
+    feed = (
+        {"amplitude": amp, "depth": depth}
+        | ({"rgb": rgb} if with_rgb else {})
+        | ({"classical": classical} if hybrid else {})
+    )
     (got,) = sess.run(None, feed)
     with torch.no_grad():
         args = [torch.from_numpy(x) for x in (amp, depth / 10)]
         rgb_t = torch.from_numpy(rgb) if with_rgb else None
-        if variant == "gated":
+        if maps:
             # Format 2: the graph outputs the head's maps at 1/4; the daemon applies them.
-            assert on_disk["graphs"]["refine"]["apply"]["kind"] == "gated-kernel"
-            assert on_disk["graphs"]["refine"]["apply"]["stride"] == 4
-            want = model.refine.gated_maps(*args, rgb_t)
-            assert got.shape == (1, 12, 10, 12)
+            apply = on_disk["graphs"]["refine"]["apply"]
+            assert apply["kind"] == ("hybrid-kernel" if hybrid else "gated-kernel")
+            assert apply["stride"] == 4
+            assert ("jump_scale" in apply) == hybrid
+            c_t = torch.from_numpy(classical / 10) if hybrid else None
+            want = model.refine.head_maps(*args, rgb_t, c_t)
+            assert got.shape == (1, 13 if hybrid else 12, 10, 12)
         else:
             assert "apply" not in on_disk["graphs"]["refine"]
             want = model.refine(*args, rgb_t) * 10
@@ -105,3 +117,21 @@ def test_refine_only_export_refuses_another_normalisation(tmp_path: Path) -> Non
     other = get_profile("smoke", variant="gated", norm=Normalisation(max_depth=8.0))
     with pytest.raises(ValueError, match="normalisation"):
         export_refine_into(build_model(other).eval(), other, out, check=False, macs_at=None)
+
+
+def test_recipe_record_says_how_far_a_stopped_run_got() -> None:
+    from dear_train.export import recipe_record
+
+    history = [{"epoch": e, "val": {"mae": 10.0 - e}} for e in range(3)]
+    stopped = recipe_record({"data": ["d"], "history": history})
+    assert stopped["training"]["epochs_trained"] == 3
+    assert stopped["training"]["from"].startswith("last.pt")
+    assert stopped["validation"] == {"mae": 8.0}
+    final = recipe_record({"data": ["d"], "frames": {"train": 9}, "metrics": {"mae": 1.0}})
+    assert final["training"] == {
+        "data": ["d"],
+        "frames": {"train": 9},
+        "epochs_trained": 0,
+        "from": "final.pt",
+    }
+    assert final["validation"] == {"mae": 1.0}

@@ -1,4 +1,4 @@
-"""``fixtures/kernel_apply/gated.json`` still is what the Python definition computes.
+"""``fixtures/kernel_apply/{gated,hybrid}.json`` still are what the Python definitions compute.
 
 The Rust tail of format-2 bundles is checked against that file
 (``pipeline/tests/kernel_apply_parity.rs``); this test fails when the PyTorch definition or the
@@ -45,3 +45,18 @@ def test_fixture_constants_are_the_exported_ones() -> None:
     assert apply["stride"] == doc["stride"]
     # The Rust test hard-codes these two; the exporter writes them into model.json.
     assert (apply["max_bias"], apply["range_scale"]) == (0.05, 100.0)
+
+
+def test_hybrid_fixture_matches_the_python_definition() -> None:
+    doc = json.loads((FIXTURE / "hybrid.json").read_text())
+    make = _maker()
+    c = make.hybrid_case()
+    for k in ("depth", "classical", "maps"):
+        np.testing.assert_array_equal(np.array(doc[k]["data"], np.float32), c[k].ravel())
+    want = np.array(doc["out"]["data"], np.float32).reshape(doc["out"]["shape"])
+    got = make.expected_hybrid(c["depth"], c["classical"], c["maps"])
+    np.testing.assert_allclose(got, want, atol=1e-6)
+    apply = refine_apply_spec(build_refine("edge", "hybrid"))
+    assert apply is not None
+    # The Rust test hard-codes these; the exporter writes them into model.json.
+    assert (apply["max_bias"], apply["range_scale"], apply["jump_scale"]) == (0.05, 100.0, 300.0)

@@ -211,3 +211,50 @@ def test_gated_refiner_starts_close_to_the_input() -> None:
     with torch.no_grad():
         out = net(torch.rand(1, 1, 48, 64), depth, torch.rand(1, 3, 48, 64))
     assert (out - depth).abs().mean() < 0.002
+
+
+def _hybrid_maps(shape: tuple[int, int], trust: float) -> torch.Tensor:
+    """Hybrid head maps: a closed gated kernel and a constant trust-in-classical logit."""
+    h, w = shape
+    gated = _gated_maps(torch.zeros(1, 9, h, w, dtype=torch.float64), gate=1e-9)
+    return torch.cat([gated, torch.full((1, 1, h, w), trust, dtype=torch.float64)], dim=1)
+
+
+def test_hybrid_chooses_between_measurement_and_classical_and_fills_holes() -> None:
+    from dear_train.models.kpn import HybridKernelApply
+
+    rng = np.random.default_rng(6)
+    depth = torch.from_numpy(rng.uniform(0.1, 0.3, (1, 1, H, W)))
+    classical = depth + 0.0005  # a 5 mm smoothing correction everywhere
+    classical[0, 0, 2, 2] = depth[0, 0, 2, 2] + 0.05  # a 50 cm jump (a snapped flying pixel)
+    depth[0, 0, 0, 0] = 0.0  # a hole the classical filter filled
+    classical[0, 0, 4, 5] = 0.0  # a pixel the classical filter dropped
+    apply = HybridKernelApply()
+    keep = apply(depth, classical, _hybrid_maps((H, W), trust=-40.0))
+    take = apply(depth, classical, _hybrid_maps((H, W), trust=40.0))
+    both = (depth > 0) & (classical > 0)
+    small = both.clone()
+    small[0, 0, 2, 2] = False
+    torch.testing.assert_close(keep[small], depth[small])  # distrusted: the measurement
+    torch.testing.assert_close(take[both], classical[both])  # trusted: the classical output
+    # A far jump outweighs moderate distrust: 0.05 × HYBRID_JUMP_SCALE = +15 on the logit,
+    # while a 5 mm smoothing step adds only 0.15.
+    wary = apply(depth, classical, _hybrid_maps((H, W), trust=-5.0))
+    torch.testing.assert_close(wary[small], depth[small], atol=1e-5, rtol=0)
+    assert (wary[0, 0, 2, 2] - classical[0, 0, 2, 2]).abs() < 0.05 * 1e-3
+    for out in (keep, take):
+        # A hole filled from the classical output; a classical gap keeps the measurement.
+        assert float(out[0, 0, 0, 0]) == pytest.approx(float(classical[0, 0, 0, 0]), abs=1e-9)
+        assert float(out[0, 0, 4, 5]) == pytest.approx(float(depth[0, 0, 4, 5]), abs=1e-9)
+
+
+def test_hybrid_refiner_starts_close_to_the_classical_output() -> None:
+    torch.manual_seed(0)
+    net = build_refine("edge", "hybrid").eval()
+    depth = torch.rand(1, 1, 48, 64) * 0.3 + 0.05
+    classical = depth + 0.001 * torch.randn_like(depth)
+    with torch.no_grad():
+        out = net(torch.rand(1, 1, 48, 64), depth, torch.rand(1, 3, 48, 64), classical)
+    assert (out - classical).abs().mean() < 0.3 * (depth - classical).abs().mean()
+    with pytest.raises(ValueError, match="dear-synth classical"):
+        net(torch.rand(1, 1, 48, 64), depth, torch.rand(1, 3, 48, 64))

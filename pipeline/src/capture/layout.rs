@@ -16,6 +16,9 @@ pub struct FramePaths {
     pub gt_depth: PathBuf,
     pub mask: PathBuf,
     pub flow: PathBuf,
+    /// The classical refiner's output for the frame's depth (training input of refiners that
+    /// take it; `dear-synth classical`), 16-bit like the depth.
+    pub classical: PathBuf,
 }
 
 impl FramePaths {
@@ -30,6 +33,7 @@ impl FramePaths {
             gt_depth: file("gt.png"),
             mask: file("mask.png"),
             flow: file("flow.flo"),
+            classical: file("classical.png"),
         }
     }
 }

@@ -1,5 +1,5 @@
-//! The paper's per-frame chain (DESIGN.md, "The algorithm", steps 1–8) around the three graphs
-//! of a bundle, writing its result into caller-provided views (the daemon passes views of
+//! The paper's per-frame chain (docs/design.md, "The equations and where they live") around the
+//! three graphs of a bundle, writing its result into caller-provided views (the daemon passes views of
 //! shared memory, so the published frame is never copied).
 //!
 //! `Full` mode is the paper: every frame runs the rough-flow network and re-solves the
@@ -19,6 +19,7 @@ use crate::align::StaticAligner;
 use crate::calibration::Calibration;
 use crate::dear::confidence::confidence_into;
 use crate::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
+use crate::filter::ClassicalRefiner;
 use crate::frame::Flow;
 use crate::geometry::surface::is_valid_depth;
 use crate::geometry::{warp_bilinear, warp_depth, LsqError, RobustOptions};
@@ -206,6 +207,16 @@ pub struct DearChain {
     depth_warped: Array2<f32>,
     amplitude_warped: Array2<f32>,
     refined: Array2<f32>,
+    /// `hybrid` refiners: the classical refiner they build on, its output and confidence.
+    classical: Option<ClassicalStage>,
+}
+
+/// The classical refiner run on the warped depth before a `hybrid` refine graph.
+#[derive(Debug)]
+struct ClassicalStage {
+    refiner: ClassicalRefiner,
+    depth: Array2<f32>,
+    confidence: Array2<u8>,
 }
 
 impl DearChain {
@@ -229,6 +240,11 @@ impl DearChain {
     ) -> Result<Self, BundleError> {
         let runner = BundleRunner::with_options(bundle, width, height, options.runner)?;
         let plane = || Array2::zeros((height, width));
+        let classical = runner.refine_uses_classical().then(|| ClassicalStage {
+            refiner: ClassicalRefiner::default(),
+            depth: plane(),
+            confidence: Array2::zeros((height, width)),
+        });
         let flow = || Flow::zeros(height, width);
         Ok(DearChain {
             runner,
@@ -246,6 +262,7 @@ impl DearChain {
             depth_warped: plane(),
             amplitude_warped: plane(),
             refined: plane(),
+            classical,
         })
     }
 
@@ -402,10 +419,23 @@ impl DearChain {
             .runner
             .refine_uses_rgb()
             .then(|| [r.view(), g.view(), b.view()]);
+        let classical = match &mut self.classical {
+            Some(stage) => {
+                stage.refiner.refine_into(
+                    self.depth_warped.view(),
+                    input.rgb,
+                    stage.depth.view_mut(),
+                    stage.confidence.view_mut(),
+                );
+                Some(stage.depth.view())
+            }
+            None => None,
+        };
         self.runner.refine(
             self.amplitude_warped.view(),
             self.depth_warped.view(),
             rgb,
+            classical,
             self.refined.view_mut(),
         )?;
         let ChainOutput {

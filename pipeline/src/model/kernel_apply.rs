@@ -21,6 +21,9 @@ use crate::model::manifest::RefineApply;
 
 /// Head channels of the gated refiner: 9 kernel logits, bias, gate, log-sharpness.
 pub const GATED_CHANNELS: usize = 12;
+/// Head channels of the hybrid refiner: the gated refiner's 12, then the trust-in-classical
+/// logit.
+pub const HYBRID_CHANNELS: usize = 13;
 
 /// The constants of one gated refiner (from its manifest).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -29,6 +32,8 @@ pub struct GatedKernel {
     pub max_bias: f32,
     pub range_scale: f32,
     pub max_depth_m: f32,
+    /// `Some` for a hybrid refiner ([`blend_classical`]): its `jump_scale`.
+    pub jump_scale: Option<f32>,
 }
 
 impl GatedKernel {
@@ -38,6 +43,7 @@ impl GatedKernel {
             max_bias: apply.max_bias,
             range_scale: apply.range_scale,
             max_depth_m,
+            jump_scale: apply.jump_scale,
         }
     }
 }
@@ -107,7 +113,11 @@ pub fn apply_gated(
     mut out: ArrayViewMut2<f32>,
     k: &GatedKernel,
 ) {
-    assert_eq!(maps.len(), GATED_CHANNELS, "gated maps: 12 planes");
+    assert!(
+        maps.len() >= GATED_CHANNELS,
+        "gated maps: 12 planes (a hybrid head's 13th is read by blend_classical)"
+    );
+    let maps = &maps[..GATED_CHANNELS];
     let (h, w) = depth.dim();
     assert_eq!(out.dim(), (h, w), "output shape");
     let (h4, w4) = maps[0].dim();
@@ -141,6 +151,81 @@ pub fn apply_gated(
                     k,
                     out_row,
                 );
+            },
+        );
+}
+
+/// The hybrid refiner's first step (`HybridKernelApply` in kpn.py): per pixel, the measured
+/// `depth` and the `classical` refiner's output are blended with the trust
+/// `t = σ(m_12 + jump_scale · |c − d| / max_depth)` (map 12 upsampled like the others):
+///
+/// ```text
+/// base = d + t · (c − d)   where both are valid
+///        d                 where only d is,   c where only c is,   0 where neither
+/// ```
+///
+/// [`apply_gated`] then runs on `base` with maps 0–11. All planes in metres.
+///
+/// # Panics
+/// When `maps` has no plane 12, the planes differ in shape from `depth`, or `k` is not a
+/// hybrid kernel.
+pub fn blend_classical(
+    maps: &[Array2<f32>],
+    depth: ArrayView2<f32>,
+    classical: ArrayView2<f32>,
+    mut base: ArrayViewMut2<f32>,
+    k: &GatedKernel,
+) {
+    assert_eq!(maps.len(), HYBRID_CHANNELS, "hybrid maps: 13 planes");
+    let jump = k.jump_scale.expect("blend_classical needs a hybrid kernel") / k.max_depth_m;
+    let (h, w) = depth.dim();
+    assert_eq!(classical.dim(), (h, w), "classical shape");
+    assert_eq!(base.dim(), (h, w), "base shape");
+    let trust_map = &maps[12];
+    let (h4, w4) = trust_map.dim();
+    assert!(
+        h4 * k.stride >= h && w4 * k.stride >= w,
+        "maps {h4}x{w4} at stride {} do not cover {h}x{w}",
+        k.stride
+    );
+    let xs = taps(w, w4, k.stride);
+    let ys = taps(h, h4, k.stride);
+    base.axis_iter_mut(Axis(0))
+        .into_par_iter()
+        .zip(depth.axis_iter(Axis(0)))
+        .zip(classical.axis_iter(Axis(0)))
+        .enumerate()
+        .for_each_init(
+            || vec![0.0f32; w4],
+            |low, (y, ((mut out, d_row), c_row))| {
+                let (y0, y1, fy) = ys[y];
+                let (r0, r1) = (trust_map.row(y0 as usize), trust_map.row(y1 as usize));
+                for ((l, a), b) in low.iter_mut().zip(r0.iter()).zip(r1.iter()) {
+                    *l = a + fy * (b - a);
+                }
+                for (((o, &d), &c), &(x0, x1, fx)) in
+                    out.iter_mut().zip(d_row.iter()).zip(c_row.iter()).zip(&xs)
+                {
+                    let a = low[x0 as usize];
+                    let logit = a + fx * (low[x1 as usize] - a);
+                    let d_ok = d > 0.0 && d.is_finite();
+                    let c_ok = c > 0.0 && c.is_finite();
+                    *o = match (d_ok, c_ok) {
+                        (true, true) => {
+                            let t = sigmoid(logit + jump * (c - d).abs());
+                            let b = d + t * (c - d);
+                            // A corrupt trust map falls back to the measurement.
+                            if b.is_finite() {
+                                b
+                            } else {
+                                d
+                            }
+                        }
+                        (true, false) => d,
+                        (false, true) => c,
+                        (false, false) => 0.0,
+                    };
+                }
             },
         );
 }
@@ -272,6 +357,7 @@ mod tests {
             max_bias: 0.05,
             range_scale: 100.0,
             max_depth_m: 10.0,
+            jump_scale: None,
         }
     }
 
@@ -340,6 +426,65 @@ mod tests {
                 assert!((o - depth[[y, x]]).abs() < 1e-3, "({y},{x}) {o}");
             }
         }
+    }
+
+    fn hybrid() -> GatedKernel {
+        GatedKernel {
+            jump_scale: Some(300.0),
+            ..kernel()
+        }
+    }
+
+    fn hybrid_maps(trust: f32) -> Vec<Array2<f32>> {
+        (0..HYBRID_CHANNELS)
+            .map(|c| Array2::from_elem((2, 2), if c == 12 { trust } else { 0.0 }))
+            .collect()
+    }
+
+    #[test]
+    fn blend_follows_the_trust_map_and_fills_from_whichever_is_valid() {
+        let depth = Array2::from_shape_fn((8, 8), |(y, x)| match (y, x) {
+            (0, 0) => 0.0,
+            _ => 2.0,
+        });
+        let classical = Array2::from_shape_fn((8, 8), |(y, x)| match (y, x) {
+            (1, 1) | (0, 0) => 0.0,
+            (2, 2) => 3.0,
+            _ => 2.001,
+        });
+        let mut base = Array2::zeros((8, 8));
+        // Strongly distrusted: the measurement, except a far jump (1 m ≙ logit +30).
+        blend_classical(
+            &hybrid_maps(-20.0),
+            depth.view(),
+            classical.view(),
+            base.view_mut(),
+            &hybrid(),
+        );
+        assert_eq!(base[[0, 0]], 0.0, "neither valid");
+        assert_eq!(base[[1, 1]], 2.0, "only the measurement");
+        assert!((base[[3, 3]] - 2.0).abs() < 1e-6);
+        assert!((base[[2, 2]] - 3.0).abs() < 1e-3, "{}", base[[2, 2]]);
+        // Half trust: halfway (the 1 mm jump adds only 0.03 to the logit).
+        blend_classical(
+            &hybrid_maps(0.0),
+            depth.view(),
+            classical.view(),
+            base.view_mut(),
+            &hybrid(),
+        );
+        assert!((base[[3, 3]] - 2.0005).abs() < 2e-5, "{}", base[[3, 3]]);
+        // A hole in the measurement that the classical filter filled is taken from it.
+        let mut holed = depth.clone();
+        holed[[5, 5]] = 0.0;
+        blend_classical(
+            &hybrid_maps(0.0),
+            holed.view(),
+            classical.view(),
+            base.view_mut(),
+            &hybrid(),
+        );
+        assert_eq!(base[[5, 5]], 2.001);
     }
 
     #[test]

@@ -80,16 +80,57 @@ pub struct GraphSpec {
 /// definition beside these numbers).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RefineApply {
-    /// Always `"gated-kernel"` (the only kind this crate applies).
+    /// `"gated-kernel"` (12 maps applied to the warped depth) or `"hybrid-kernel"` (13 maps:
+    /// a per-pixel choice between the warped depth and the classical refiner's output, then
+    /// the gated kernel); see [`ApplyKind`].
     pub kind: String,
     /// Upsampling factor of the maps (2, 4 or 8; divides `input_size_multiple`).
     pub stride: usize,
-    /// Always 12.
+    /// 12 for `gated-kernel`, 13 for `hybrid-kernel`.
     pub channels: usize,
     /// Largest depth correction, normalised depth.
     pub max_bias: f32,
     /// Scale of the depth-range attenuation of the kernel weights.
     pub range_scale: f32,
+    /// `hybrid-kernel` only: trust-logit added per unit of normalised |classical − depth|.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub jump_scale: Option<f32>,
+}
+
+/// The kinds of [`RefineApply`] this build implements.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ApplyKind {
+    /// The gated kernel on the warped depth.
+    Gated,
+    /// The gated kernel on a per-pixel blend of the warped depth and the classical refiner's
+    /// output (the graph also takes that output as its `classical` input).
+    Hybrid,
+}
+
+impl ApplyKind {
+    /// The kind named `kind` in a manifest, if this build implements it.
+    pub fn parse(kind: &str) -> Option<Self> {
+        match kind {
+            "gated-kernel" => Some(ApplyKind::Gated),
+            "hybrid-kernel" => Some(ApplyKind::Hybrid),
+            _ => None,
+        }
+    }
+
+    /// Head maps of this kind.
+    pub fn channels(self) -> usize {
+        match self {
+            ApplyKind::Gated => crate::model::kernel_apply::GATED_CHANNELS,
+            ApplyKind::Hybrid => crate::model::kernel_apply::HYBRID_CHANNELS,
+        }
+    }
+}
+
+impl RefineApply {
+    /// The validated kind ([`Manifest::parse`] refuses any other).
+    pub fn apply_kind(&self) -> ApplyKind {
+        ApplyKind::parse(&self.kind).unwrap_or(ApplyKind::Gated)
+    }
 }
 
 /// What a graph outputs: its name, channels, and its resolution as a divisor of the input's.
@@ -165,6 +206,7 @@ pub(crate) fn contract(role: &str) -> Option<Contract> {
                 ("amplitude", 1, true),
                 ("depth", 1, true),
                 ("rgb", 3, false),
+                ("classical", 1, false),
             ],
             output: ("depth_refined", 1),
         }),
@@ -301,6 +343,23 @@ impl Manifest {
                     }
                 )));
             }
+            let has_classical = g.inputs.iter().any(|t| t.name == "classical");
+            let hybrid = g
+                .apply
+                .as_ref()
+                .is_some_and(|a| a.apply_kind() == ApplyKind::Hybrid);
+            if has_classical != hybrid {
+                return Err(broken(format!(
+                    "the refine graph {} a classical input but its apply kind is {:?} (only \
+                     \"hybrid-kernel\" takes the classical refiner's output)",
+                    if has_classical {
+                        "declares"
+                    } else {
+                        "does not declare"
+                    },
+                    g.apply.as_ref().map_or("none", |a| a.kind.as_str())
+                )));
+            }
         }
         Ok(())
     }
@@ -313,18 +372,32 @@ impl Manifest {
 
 /// Checks a refine graph's `apply` against what [`crate::model::kernel_apply`] implements.
 fn check_apply(a: &RefineApply, multiple: usize) -> Result<(), String> {
-    if a.kind != "gated-kernel" {
+    let Some(kind) = ApplyKind::parse(&a.kind) else {
         return Err(format!(
-            "apply.kind {:?} is unknown (this build applies \"gated-kernel\")",
+            "apply.kind {:?} is unknown (this build applies \"gated-kernel\" and \
+             \"hybrid-kernel\")",
             a.kind
         ));
-    }
-    if a.channels != crate::model::kernel_apply::GATED_CHANNELS {
+    };
+    if a.channels != kind.channels() {
         return Err(format!(
-            "apply.channels is {}, a gated-kernel head has {}",
+            "apply.channels is {}, a {} head has {}",
             a.channels,
-            crate::model::kernel_apply::GATED_CHANNELS
+            a.kind,
+            kind.channels()
         ));
+    }
+    match (kind, a.jump_scale) {
+        (ApplyKind::Hybrid, None) => {
+            return Err("apply.jump_scale is required for \"hybrid-kernel\"".into())
+        }
+        (ApplyKind::Hybrid, Some(v)) if !(v.is_finite() && v >= 0.0) => {
+            return Err(format!("apply.jump_scale {v} is not a non-negative number"))
+        }
+        (ApplyKind::Gated, Some(_)) => {
+            return Err("apply.jump_scale belongs to \"hybrid-kernel\" only".into())
+        }
+        _ => {}
     }
     if !matches!(a.stride, 2 | 4 | 8) || !multiple.is_multiple_of(a.stride) {
         return Err(format!(

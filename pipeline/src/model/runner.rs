@@ -17,7 +17,7 @@ use tract_onnx::prelude::*;
 use crate::frame::Flow;
 use crate::model::bundle::{LoadedGraph, ModelBundle};
 use crate::model::error::BundleError;
-use crate::model::kernel_apply::{apply_gated, GatedKernel};
+use crate::model::kernel_apply::{apply_gated, blend_classical, GatedKernel};
 use crate::model::manifest::{contract, output_contract, GraphOutput};
 
 /// Largest padded side a runner accepts: beyond it a single plane is gigabytes.
@@ -51,6 +51,8 @@ pub struct BundleRunner {
     refine: GraphRunner,
     /// Format 2: the refiner's tail, applied in Rust, and the buffers of its maps.
     refine_tail: Option<(GatedKernel, Vec<Array2<f32>>)>,
+    /// Hybrid refiners: the blend of depth and classical output the gated kernel runs on.
+    blended: Option<Array2<f32>>,
 }
 
 impl BundleRunner {
@@ -108,6 +110,10 @@ impl BundleRunner {
                 .collect();
             (k, maps)
         });
+        let blended = refine_tail
+            .as_ref()
+            .filter(|(k, _)| k.jump_scale.is_some())
+            .map(|_| Array2::zeros((height, width)));
         Ok(BundleRunner {
             width,
             height,
@@ -117,6 +123,7 @@ impl BundleRunner {
             fuse: build("fuse")?,
             refine: build("refine")?,
             refine_tail,
+            blended,
         })
     }
 
@@ -128,6 +135,12 @@ impl BundleRunner {
     /// `(height, width)` the graphs run at (the stream's, padded up to the size multiple).
     pub fn padded_dim(&self) -> (usize, usize) {
         self.padded
+    }
+
+    /// Whether [`refine`](Self::refine) needs the classical refiner's output (a `hybrid`
+    /// refiner).
+    pub fn refine_uses_classical(&self) -> bool {
+        self.blended.is_some()
     }
 
     /// Whether [`refine`](Self::refine) needs the RGB planes.
@@ -166,30 +179,38 @@ impl BundleRunner {
         )
     }
 
-    /// Refined depth (metres) from the warped normalised amplitude, the warped depth (metres)
-    /// and, for variants that use it, the RGB planes.
+    /// Refined depth (metres) from the warped normalised amplitude, the warped depth (metres),
+    /// for variants that use them the RGB planes, and for `hybrid` refiners the classical
+    /// refiner's output on the warped depth (metres).
     ///
     /// # Errors
-    /// As [`flow`](Self::flow); [`BundleError::Run`] also when the graph needs RGB and `rgb`
-    /// is `None`.
+    /// As [`flow`](Self::flow); [`BundleError::Run`] also when the graph needs RGB or the
+    /// classical output and it is `None`.
     pub fn refine(
         &mut self,
         amplitude: ArrayView2<f32>,
         depth: ArrayView2<f32>,
         rgb: Option<[ArrayView2<f32>; 3]>,
-        out: ArrayViewMut2<f32>,
+        classical: Option<ArrayView2<f32>>,
+        mut out: ArrayViewMut2<f32>,
     ) -> Result<(), BundleError> {
+        let missing = |what: &str| BundleError::Run {
+            graph: "refine",
+            message: format!("this refinement variant needs {what}"),
+        };
         let amp = [amplitude];
         let dep = [depth];
         let mut inputs: Vec<(&str, &[ArrayView2<f32>])> =
             vec![("amplitude", &amp), ("depth", &dep)];
         let rgb_planes;
         if self.refine_uses_rgb {
-            rgb_planes = rgb.ok_or_else(|| BundleError::Run {
-                graph: "refine",
-                message: "this refinement variant needs the RGB image".into(),
-            })?;
+            rgb_planes = rgb.ok_or_else(|| missing("the RGB image"))?;
             inputs.push(("rgb", &rgb_planes));
+        }
+        let classical_plane;
+        if self.blended.is_some() {
+            classical_plane = [classical.ok_or_else(|| missing("the classical refiner's output"))?];
+            inputs.push(("classical", &classical_plane));
         }
         match &mut self.refine_tail {
             None => self.refine.run(&inputs, &mut [out]),
@@ -197,7 +218,13 @@ impl BundleRunner {
                 let mut views: Vec<ArrayViewMut2<f32>> =
                     maps.iter_mut().map(|m| m.view_mut()).collect();
                 self.refine.run(&inputs, &mut views)?;
-                apply_gated(maps, depth, out, kernel);
+                match (&mut self.blended, classical) {
+                    (Some(base), Some(c)) => {
+                        blend_classical(maps, depth, c, base.view_mut(), kernel);
+                        apply_gated(maps, base.view(), out.view_mut(), kernel);
+                    }
+                    _ => apply_gated(maps, depth, out, kernel),
+                }
                 Ok(())
             }
         }

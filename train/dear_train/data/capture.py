@@ -1,4 +1,4 @@
-"""Reader and writer of the capture-directory format (DESIGN.md, "Capture directory format").
+"""Reader and writer of the capture-directory format (docs/design.md, "Capture directory format").
 
 ```
 capture.json             {"format": "dear-capture", "version": 1, "width", "height",
@@ -9,6 +9,9 @@ frames/NNNNNN.amp.png    16-bit raw ToF amplitude
 frames/NNNNNN.depth.png  16-bit ToF depth (× depth_scale → metres), 0 = invalid
 frames/NNNNNN.gt.png     optional ground-truth depth in the RGB view
 frames/NNNNNN.mask.png   optional 8-bit validity mask (non-zero = valid)
+frames/NNNNNN.classical.png  optional 16-bit classical refiner output on the ToF grid
+                         (× depth_scale → metres), written by `dear-synth classical` for
+                         training refiners that take it
 frames/NNNNNN.flow.flo   optional ground-truth RGB→ToF flow (Middlebury .flo)
 ```
 
@@ -63,6 +66,7 @@ class Frame:
     mask: np.ndarray | None = None  # (H, W) bool
     flow: np.ndarray | None = None  # (2, H, W) float32 px, RGB → ToF
     perturbation: Calibration | None = None
+    classical: np.ndarray | None = None  # (H, W) float32 metres, classical filter (ToF grid)
 
 
 @dataclass
@@ -286,6 +290,10 @@ class Capture:
             frame.gt_depth = read_u16(path("gt.png"), size).astype(np.float32) * np.float32(scale)
         if path("mask.png").exists():
             frame.mask = read_mask(path("mask.png"), size)
+        if path("classical.png").exists():
+            frame.classical = read_u16(path("classical.png"), size).astype(np.float32) * np.float32(
+                scale
+            )
         if path("flow.flo").exists():
             flow = read_flo(path("flow.flo"), size)
             if not np.isfinite(flow).all():

@@ -68,12 +68,19 @@ def make_sample(
     norm: Normalisation,
     augment_cfg: AugmentConfig | None,
     rng: np.random.Generator,
+    classical: bool = False,
 ) -> dict[str, np.ndarray]:
     """Full-frame training sample as float32 ``(C, H, W)`` arrays (see the module docstring).
 
     Keys: ``rgb`` [0, 1] on the RGB grid; ``amplitude`` normalised and ``tof_depth`` metres on
-    the ToF grid; ``gt_depth`` metres on the RGB grid; ``flow`` RGB→ToF px and ``flow_valid``.
+    the ToF grid; ``gt_depth`` metres on the RGB grid; ``flow`` RGB→ToF px and ``flow_valid``;
+    with ``classical``, ``tof_classical``: the classical refiner's output (metres, ToF grid).
     """
+    if classical and frame.classical is None:
+        raise ValueError(
+            f"frame {frame.id}: no classical.png (add the classical refiner's planes with "
+            "`dear-synth classical --capture DIR`)"
+        )
     if frame.gt_depth is None or frame.perturbation is None:
         raise ValueError(f"frame {frame.id}: needs ground-truth depth and a known perturbation")
     tof_depth = frame.depth.copy()
@@ -95,7 +102,7 @@ def make_sample(
         else:
             u, v, valid = p.flow_at(gt)
             flow = np.stack([u, v])
-    return {
+    sample = {
         "rgb": (rgb.astype(np.float32) / 255.0).transpose(2, 0, 1),
         "amplitude": normalize_amplitude(frame.amplitude, tof_depth, norm.amplitude_percentile)[
             None
@@ -105,6 +112,12 @@ def make_sample(
         "flow": np.where(valid, flow, 0).astype(np.float32),
         "flow_valid": valid[None],
     }
+    if classical:
+        # Not masked: the classical filter ran on the masked depth and filled what it could,
+        # as it does in the daemon.
+        assert frame.classical is not None
+        sample["tof_classical"] = frame.classical[None].astype(np.float32)
+    return sample
 
 
 def crop_sample(
@@ -143,6 +156,8 @@ class DearDataset(Dataset):
         seed: base seed; sample ``i`` in epoch ``e`` uses ``(seed, e, i)`` so runs reproduce
             and every epoch draws new misalignments.
         items: restrict to these ``(capture index, frame index)`` pairs (train/val split).
+        classical: also load the classical refiner's planes (``tof_classical``), for refiners
+            that take them; a frame without one is an error naming it.
     """
 
     def __init__(
@@ -153,6 +168,7 @@ class DearDataset(Dataset):
         norm: Normalisation | None = None,
         seed: int = 0,
         items: list[tuple[int, int]] | None = None,
+        classical: bool = False,
     ) -> None:
         if crop is not None and (crop[0] % SIZE_MULTIPLE or crop[1] % SIZE_MULTIPLE):
             raise ValueError(f"crop {crop} must be multiples of {SIZE_MULTIPLE}")
@@ -161,6 +177,7 @@ class DearDataset(Dataset):
         self.augment = augment
         self.norm = norm or Normalisation()
         self.seed = seed
+        self.classical = classical
         self.epoch = 0
         self.skipped = 0
         if items is None:
@@ -190,7 +207,10 @@ class DearDataset(Dataset):
         ci, fi = self.items[index]
         rng = np.random.default_rng([self.seed, self.epoch, index])
         frame = self.captures[ci].load(fi)
-        sample = make_sample(frame, self.norm, self.augment, rng)
+        try:
+            sample = make_sample(frame, self.norm, self.augment, rng, self.classical)
+        except ValueError as e:
+            raise ValueError(f"{self.captures[ci].root}: {e}") from e
         if self.crop is not None:
             sample = crop_sample(sample, self.crop, rng)
         else:

@@ -1,8 +1,9 @@
 """The whole DEAR pipeline as one differentiable module (end-to-end training and evaluation).
 
-Steps (DESIGN.md, "The algorithm"): ``W_rough = F(RGB, I)``; ``D_rgb = D_tof ∘ W_rough``;
-per-axis least squares for ``(t, c)``; ``W_convt = t / D_rgb + c``; ``W_refn = G(W_rough,
-W_convt)``; ``D = D_tof ∘ W_refn``, ``I ∘ W_refn``; ``D_out = KPN(I∘W, D/max_depth, RGB)``.
+Steps (docs/design.md, "The equations and where they live"): ``W_rough = F(RGB, I)``; ``D_rgb =
+D_tof ∘ W_rough``; per-axis least squares for ``(t, c)``; ``W_convt = t / D_rgb + c``; ``W_refn =
+G(W_rough, W_convt)``; ``D = D_tof ∘ W_refn``, ``I ∘ W_refn``; ``D_out = KPN(I∘W, D/max_depth,
+RGB)``.
 
 The warps and the solve are the training-time torch versions from :mod:`dear_train.geometry`;
 in deployment the daemon runs them in Rust between the three exported graphs.
@@ -16,7 +17,7 @@ from torch import nn
 from dear_train.geometry import convt_flow, solve_calibration, warp_bilinear, warp_depth
 from dear_train.models.flownetc import FlowNetC
 from dear_train.models.fusion import FusionNet
-from dear_train.models.kpn import RefineNet
+from dear_train.models.kpn import RefineNet, uses_classical
 
 
 class DEAR(nn.Module):
@@ -69,21 +70,35 @@ class DEAR(nn.Module):
         amplitude: torch.Tensor,
         tof_depth: torch.Tensor,
         flow: torch.Tensor,
+        tof_classical: torch.Tensor | None = None,
     ) -> dict[str, torch.Tensor]:
-        """Warp ToF depth and amplitude with ``flow`` and refine; depths in metres."""
+        """Warp ToF depth and amplitude with ``flow`` and refine; depths in metres.
+
+        ``tof_classical``: the classical refiner's output on the ToF grid (metres), for
+        refiners that take it (``hybrid``); warped like the depth. The daemon runs the classical
+        filter on the warped depth instead; at the true calibration of an aligned frame the
+        two agree, and elsewhere the warp only moves the filtered surfaces.
+        """
         if self.refine is None:
             raise RuntimeError("refine_depth() needs a refinement net")
         d_w, d_valid = warp_depth(tof_depth, flow)
         a_w, _ = warp_bilinear(amplitude, flow)
-        d_out = self.refine(a_w, d_w / self.max_depth, rgb) * self.max_depth
+        c_w = None
+        if tof_classical is not None and uses_classical(self.refine.variant):
+            c_w = warp_depth(tof_classical, flow)[0] / self.max_depth
+        d_out = self.refine(a_w, d_w / self.max_depth, rgb, c_w) * self.max_depth
         return {"depth_warped": d_w, "depth_warped_valid": d_valid, "depth": d_out}
 
     def forward(
-        self, rgb: torch.Tensor, amplitude: torch.Tensor, tof_depth: torch.Tensor
+        self,
+        rgb: torch.Tensor,
+        amplitude: torch.Tensor,
+        tof_depth: torch.Tensor,
+        tof_classical: torch.Tensor | None = None,
     ) -> dict[str, torch.Tensor | list[torch.Tensor]]:
         """The full pipeline: :meth:`align` then :meth:`refine_depth` with the final flow."""
         out = self.align(rgb, amplitude, tof_depth)
         flow = out.get("flow_refn", out["flow_rough"])
         assert isinstance(flow, torch.Tensor)
-        out.update(self.refine_depth(rgb, amplitude, tof_depth, flow))
+        out.update(self.refine_depth(rgb, amplitude, tof_depth, flow, tof_classical))
         return out

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from dear_train.models.flownetc import FlowNetC, FlowNetCConfig
 from dear_train.models.fusion import FusionConfig, FusionNet
-from dear_train.models.kpn import RefineNet, UNetConfig
+from dear_train.models.kpn import RefineNet, UNetConfig, applies_maps
 
 EDGE_FLOW = FlowNetCConfig(
     width=0.25, max_displacement=4, stride=1, separable=True, levels=5, matching_prior=True
@@ -49,4 +49,4 @@ def edge_fusion() -> FusionNet:
 
 def edge_refine(variant: str = "kpn") -> RefineNet:
     """The edge-tier refinement net (any variant of :mod:`dear_train.models.kpn`)."""
-    return RefineNet(variant, EDGE_GATED_REFINE if variant == "gated" else EDGE_REFINE)
+    return RefineNet(variant, EDGE_GATED_REFINE if applies_maps(variant) else EDGE_REFINE)

@@ -17,6 +17,13 @@ The ``gated`` variant (what the edge bundle ships, :class:`GatedKernelApply`) is
 *safe* off its training distribution: its weights are a convex combination over the valid
 neighbours only, attenuated across depth discontinuities at full resolution, its bias is
 bounded, and a predicted gate blends the result with the input depth. See that class.
+
+The ``hybrid`` variant (:class:`HybridKernelApply`) also takes the classical refiner's output
+(``pipeline/src/filter``, run by the daemon before the graph; precomputed for training by
+``dear-synth classical``): it chooses per pixel between the measurement and the classical
+estimate, then applies the gated kernel to that choice. Off its training distribution it can
+fall back to either, so it inherits the classical filter's robustness where the network is
+unsure and keeps the measurement where the measurement was already right.
 """
 
 from __future__ import annotations
@@ -42,6 +49,7 @@ VARIANTS = (
     "norgb",
     "deeptof",
     "gated",
+    "hybrid",
 )
 
 #: Epsilon of the kernel normalisation ``Σ(|w| + ε)``.
@@ -71,6 +79,7 @@ def filter_mode(variant: str) -> FilterMode | None:
         "unet": None,
         "deeptof": None,
         "gated": None,
+        "hybrid": None,
     }[variant]
 
 
@@ -78,12 +87,24 @@ def head_channels(variant: str) -> int:
     """Output channels of a variant's backbone: gated maps, kernel + bias, or a depth."""
     if variant == "gated":
         return GATED_CHANNELS
+    if variant == "hybrid":
+        return HYBRID_CHANNELS
     return 10 if filter_mode(variant) is not None else 1
 
 
 def uses_rgb(variant: str) -> bool:
     """Whether the variant's network takes the RGB image (all but ``norgb`` and ``deeptof``)."""
     return variant not in ("norgb", "deeptof")
+
+
+def uses_classical(variant: str) -> bool:
+    """Whether the variant takes the classical refiner's output as an input (``hybrid``)."""
+    return variant == "hybrid"
+
+
+def applies_maps(variant: str) -> bool:
+    """Whether the variant's graph ends at its head maps, applied by the daemon in Rust."""
+    return variant in ("gated", "hybrid")
 
 
 def neighbourhood(x: torch.Tensor) -> torch.Tensor:
@@ -143,6 +164,47 @@ class GatedKernelApply(nn.Module):
         filtered = (w * nb).sum(dim=1, keepdim=True)
         out = depth + gate * (filtered + bias - depth)
         return out * (depth > 0).to(depth.dtype)
+
+
+#: Channels of the ``hybrid`` head: the 12 gated maps, then the trust-in-classical logit.
+HYBRID_CHANNELS = 13
+#: Initial trust logit: sigmoid(2) ≈ 0.88, so training starts close to the classical filter.
+HYBRID_TRUST_INIT = 2.0
+#: Logit added per unit of normalised |classical − measurement| (× max_depth 10 m: +1 per
+#: 3.3 cm): where the classical filter moved a pixel far (a flying pixel snapped onto a surface,
+#: an outlier replaced), its estimate is trusted unless the network insists; small moves (noise
+#: smoothing) are the network's call.
+HYBRID_JUMP_SCALE = 300.0
+
+
+class HybridKernelApply(nn.Module):
+    """The ``hybrid`` refinement: a per-pixel choice between the measurement ``D`` and the
+    classical estimate ``C``, then the ``gated`` kernel on that choice.
+
+    With ``t = sigmoid(m_12 + HYBRID_JUMP_SCALE · |C − D|)``::
+
+        B = D + t · (C − D)   where both are valid,
+            D                 where only D is,
+            C                 where only C is (a hole the classical filter filled);
+        out = GatedKernelApply(B, m_0..11)
+
+    so the output lies between the measurement and the classical estimate plus the gated
+    kernel's bounded, edge-cut correction.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.gated = GatedKernelApply()
+
+    def forward(
+        self, depth: torch.Tensor, classical: torch.Tensor, maps: torch.Tensor
+    ) -> torch.Tensor:
+        d_ok = depth > 0
+        c_ok = classical > 0
+        trust = torch.sigmoid(maps[:, 12:13] + HYBRID_JUMP_SCALE * (classical - depth).abs())
+        blended = depth + trust * (classical - depth)
+        base = torch.where(d_ok & c_ok, blended, torch.where(d_ok, depth, classical))
+        return self.gated(base, maps[:, :12])
 
 
 class KernelApply(nn.Module):
@@ -244,11 +306,12 @@ class RefineNet(nn.Module):
         self.variant = variant
         self.config = config or UNetConfig()
         self.mode = filter_mode(variant)
-        cin = 5 if uses_rgb(variant) else 2
+        cin = (5 if uses_rgb(variant) else 2) + (1 if uses_classical(variant) else 0)
         cout = head_channels(variant)
         self.backbone = UNet(cin, cout, self.config)
         self.apply_kernel = KernelApply(self.mode) if self.mode is not None else None
         self.apply_gated = GatedKernelApply() if variant == "gated" else None
+        self.apply_hybrid = HybridKernelApply() if variant == "hybrid" else None
         head = self.backbone.head
         # Small head weights (not zero, so gradients still reach the backbone at step one) and,
         # for the kernel variants, a bias making the initial kernel the identity: training
@@ -258,35 +321,62 @@ class RefineNet(nn.Module):
         nn.init.zeros_(head.bias)
         if self.mode is not None:
             head.bias.data[4] = 1.0
-        if variant == "gated":
+        if applies_maps(variant):
             head.bias.data[10] = GATED_GATE_INIT
+        if variant == "hybrid":
+            head.bias.data[12] = HYBRID_TRUST_INIT
 
     def _inputs(
-        self, amplitude: torch.Tensor, depth: torch.Tensor, rgb: torch.Tensor | None
+        self,
+        amplitude: torch.Tensor,
+        depth: torch.Tensor,
+        rgb: torch.Tensor | None,
+        classical: torch.Tensor | None,
     ) -> torch.Tensor:
         parts = [amplitude, depth]
         if uses_rgb(self.variant):
             if rgb is None:
                 raise ValueError(f"variant {self.variant!r} needs the RGB image")
             parts.append(rgb)
+        if uses_classical(self.variant):
+            if classical is None:
+                raise ValueError(
+                    f"variant {self.variant!r} needs the classical refiner's output (training "
+                    "captures get it from `dear-synth classical --capture DIR`)"
+                )
+            parts.append(classical)
         return torch.cat(parts, dim=1)
 
-    def gated_maps(
-        self, amplitude: torch.Tensor, depth: torch.Tensor, rgb: torch.Tensor | None = None
+    def head_maps(
+        self,
+        amplitude: torch.Tensor,
+        depth: torch.Tensor,
+        rgb: torch.Tensor | None = None,
+        classical: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """The ``gated`` variant's head maps at the backbone's resolution: what its exported
+        """The ``gated``/``hybrid`` head maps at the backbone's resolution: what their exported
         graph outputs (the daemon upsamples and applies them, as :meth:`forward` does)."""
-        if self.apply_gated is None:
-            raise ValueError(f"variant {self.variant!r} has no gated maps")
-        return self.backbone.forward_lowres(self._inputs(amplitude, depth, rgb))
+        if not applies_maps(self.variant):
+            raise ValueError(f"variant {self.variant!r} has no head maps applied by the daemon")
+        return self.backbone.forward_lowres(self._inputs(amplitude, depth, rgb, classical))
 
     def forward(
-        self, amplitude: torch.Tensor, depth: torch.Tensor, rgb: torch.Tensor | None = None
+        self,
+        amplitude: torch.Tensor,
+        depth: torch.Tensor,
+        rgb: torch.Tensor | None = None,
+        classical: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        if self.apply_gated is not None:
-            maps = self.gated_maps(amplitude, depth, rgb)
-            return self.apply_gated(depth, resize_like(maps, depth, self.backbone.stride))
-        out = self.backbone(self._inputs(amplitude, depth, rgb))
+        """Refined depth; ``classical`` (same units as ``depth``) only for ``hybrid``."""
+        if applies_maps(self.variant):
+            maps = self.head_maps(amplitude, depth, rgb, classical)
+            full = resize_like(maps, depth, self.backbone.stride)
+            if self.apply_hybrid is not None:
+                assert classical is not None  # checked by head_maps
+                return self.apply_hybrid(depth, classical, full)
+            assert self.apply_gated is not None
+            return self.apply_gated(depth, full)
+        out = self.backbone(self._inputs(amplitude, depth, rgb, None))
         if self.apply_kernel is None:
             if self.variant == "deeptof":
                 return depth + out

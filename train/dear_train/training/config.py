@@ -1,8 +1,8 @@
 """Training profiles and the staged schedule.
 
-The paper's schedule (DESIGN.md step 10): FlowNetC alone → FlowNetC + fusion; ToF-KPN in
-parallel (independent of the flow stages, here run after them in the same process); then an
-end-to-end fine-tune. Each stage has its own epochs and learning rate; the learning rate is
+The paper's schedule (docs/design.md, "Profiles and schedule"): FlowNetC alone → FlowNetC + fusion;
+ToF-KPN in parallel (independent of the flow stages, here run after them in the same process); then
+an end-to-end fine-tune. Each stage has its own epochs and learning rate; the learning rate is
 multiplied by ``lr_decay`` every ``lr_decay_every`` epochs.
 
 Profiles:
@@ -12,6 +12,9 @@ Profiles:
 - ``cpu``: the edge tier at 192×256 crops, sized for a 2-core machine: on 720 training frames
   (180 steps per epoch) ≈ 35 min wall time (README, "Training").
 - ``cpu-gated``: the shipped edge refiner (``gated`` variant) alone, on the ``train`` family.
+- ``cpu-hybrid``: cpu-gated's recipe for the ``hybrid`` variant (the gated kernel on a learned
+  per-pixel choice between the measurement and the classical filter); its captures need the
+  classical planes (``dear-synth classical``).
 - ``cpu-ablation``: cpu-gated on a 4-epoch schedule, for the variants trained side by side.
 - ``gpu``: the paper's recipe: paper tier, Adam, batch 3, crops 384×512, lr 4e-4 (1e-5 for the
   fine-tune), ×0.7 every 2 epochs; 20 + 20 + 40 + 10 epochs.
@@ -135,6 +138,7 @@ PROFILES: dict[str, Profile] = {
         num_workers=1,
     ),
     "cpu-gated": CPU_GATED,
+    "cpu-hybrid": replace(CPU_GATED, name="cpu-hybrid", variant="hybrid"),
     # The paper's ablation rows (Tables 2/3) and the shipped variant, trained side by side on
     # identical batches (``dear-train --variants``): cpu-gated's data, crops and optimiser on a
     # 4-epoch schedule (six variants: about 20 min per epoch while builds shared the 2 cores;

@@ -23,6 +23,7 @@ from dear_train.losses import (
     multiscale_flow_loss,
 )
 from dear_train.models.dear import DEAR
+from dear_train.models.kpn import uses_classical
 from dear_train.training import distributed
 from dear_train.training.checkpoint import (
     build_model,
@@ -72,7 +73,7 @@ class StageLoss(nn.Module):
         depth_valid = valid & (gt > 0)
         parts: dict[str, torch.Tensor] = {}
         if self.stage == "refine":
-            r = m.refine_depth(rgb, amp, tof, gt_flow)
+            r = m.refine_depth(rgb, amp, tof, gt_flow, b.get("tof_classical"))
             # Only pixels with a warped measurement: the refiner filters depth, it does not
             # invent it where none maps (the daemon publishes 0 there). Counting holes taught
             # the gated refiner to lower all depth by its largest bias, shrinking the step at
@@ -87,7 +88,9 @@ class StageLoss(nn.Module):
                 )
             else:
                 out = (
-                    m.forward(rgb, amp, tof) if self.stage == "finetune" else m.align(rgb, amp, tof)
+                    m.forward(rgb, amp, tof, b.get("tof_classical"))
+                    if self.stage == "finetune"
+                    else m.align(rgb, amp, tof)
                 )
                 flows = out["flows_rough"]
                 assert isinstance(flows, list)
@@ -105,18 +108,26 @@ class StageLoss(nn.Module):
         return total, {k: float(v.detach()) for k, v in parts.items()}
 
 
-def split_datasets(profile: Profile, data: list[Path]) -> tuple[DearDataset, DearDataset, int]:
+def split_datasets(
+    profile: Profile, data: list[Path], classical: bool | None = None
+) -> tuple[DearDataset, DearDataset, int]:
     """(training set, validation set, frames skipped) of a profile's data.
 
     Validation uses fixed misalignments (seed/epoch constant) and crops of the training size.
+    ``classical``: load the classical refiner's planes (default: when the profile's variant
+    takes them).
     """
-    full = DearDataset(data, profile.crop, profile.augment, profile.norm, profile.seed)
+    if classical is None:
+        classical = uses_classical(profile.variant)
+    full = DearDataset(
+        data, profile.crop, profile.augment, profile.norm, profile.seed, classical=classical
+    )
     train_items, val_items = split_items(full, profile.val_fraction, profile.seed)
     train = DearDataset(
-        data, profile.crop, profile.augment, profile.norm, profile.seed, train_items
+        data, profile.crop, profile.augment, profile.norm, profile.seed, train_items, classical
     )
     val = DearDataset(
-        data, profile.crop, profile.augment, profile.norm, profile.seed + 1, val_items
+        data, profile.crop, profile.augment, profile.norm, profile.seed + 1, val_items, classical
     )
     return train, val, full.skipped
 

@@ -27,6 +27,7 @@ from tqdm import tqdm
 
 from dear_train.evaluation import evaluate
 from dear_train.models.dear import DEAR
+from dear_train.models.kpn import uses_classical
 from dear_train.training import distributed
 from dear_train.training.checkpoint import (
     build_model,
@@ -62,7 +63,9 @@ def train_side_by_side(
     data = [Path(d) for d in data]
     out_dir = Path(out_dir)
     torch.manual_seed(profile.seed)
-    train_set, val_set, skipped = split_datasets(profile, data)
+    train_set, val_set, skipped = split_datasets(
+        profile, data, classical=any(uses_classical(v) for v in variants)
+    )
     profiles = {v: replace(profile, variant=v) for v in variants}
     models: dict[str, DEAR] = {}
     for v in variants:
