@@ -69,6 +69,7 @@ def table_alignment(sets: dict[int, dict[str, Report]]) -> list[str]:
 
     row("static calibration (factory)", "static-calibration", "aepe_px")
     row("classical edge matching + LS", "edge-matching", "aepe_px")
+    row("direct fit of (t, c) to all edges", "direct-fit", "aepe_px")
     for b in bundles(sets[SIGMAS[0]]):
         row(f"{b}: rough flow W_rough", b, "aepe_rough_px")
         row(f"{b}: refined flow W_refn", b, "aepe_px")
@@ -82,6 +83,7 @@ def table_alignment_one(report: dict[str, Report]) -> list[str]:
     rows = [
         ("static calibration (factory)", "static-calibration", "aepe_px"),
         ("classical edge matching + LS", "edge-matching", "aepe_px"),
+        ("direct fit of (t, c) to all edges", "direct-fit", "aepe_px"),
     ]
     for b in bundles(report):
         rows += [
@@ -132,6 +134,7 @@ def table_whole(report: dict[str, Report]) -> list[str]:
         ("static calibration", "static-calibration"),
         ("static calibration + classical filter", "static+classical-filter"),
         ("edge matching + LS + classical filter", "edge-matching+classical-filter"),
+        ("direct fit + classical filter", "direct-fit+classical-filter"),
     ]
     for b in bundles(report):
         rows += [
@@ -165,6 +168,7 @@ def table_tracking(
     rows = [
         ("(c) static (factory) calibration", "static-calibration", "–"),
         ("classical edge matching + LS, every frame", "edge-matching", "–"),
+        ("direct fit of (t, c) to all edges, every frame", "direct-fit", "–"),
     ]
     for b in bundles(report):
         rows += [

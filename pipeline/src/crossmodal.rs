@@ -267,7 +267,7 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
-fn rgb_to_gray(rgb: ArrayView3<u8>) -> Array2<f32> {
+pub(crate) fn rgb_to_gray(rgb: ArrayView3<u8>) -> Array2<f32> {
     let (h, w, _) = rgb.dim();
     Array2::from_shape_fn((h, w), |(y, x)| {
         0.299 * rgb[[y, x, 0]] as f32
@@ -278,7 +278,7 @@ fn rgb_to_gray(rgb: ArrayView3<u8>) -> Array2<f32> {
 
 /// Sobel gradient magnitude, normalised by its 99th percentile so both modalities are on one
 /// scale; borders are 0.
-fn gradient_magnitude(img: ArrayView2<f32>) -> Array2<f32> {
+pub(crate) fn gradient_magnitude(img: ArrayView2<f32>) -> Array2<f32> {
     let (h, w) = img.dim();
     let mut g = Array2::<f32>::zeros((h, w));
     for y in 1..h.saturating_sub(1) {
@@ -303,16 +303,16 @@ fn gradient_magnitude(img: ArrayView2<f32>) -> Array2<f32> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::geometry::synthesize_view;
     use ndarray::Array3;
 
-    /// Boxes at three depths in front of a wall; RGB and amplitude share the boundaries but not
-    /// the interior pattern. The RGB view is synthesised with a known calibration; the edge
-    /// matcher must recover it to within a pixel over the depth range.
-    #[test]
-    fn recovers_a_known_calibration_on_a_textured_scene() {
+    /// Discs at several depths in front of a slanted wall, seen by the ToF camera, and the RGB
+    /// view of the scene through `truth` (RGB pixel `p` sees ToF pixel `p + W(p)`). RGB and
+    /// amplitude share the boundaries but not the interior pattern. Returns `(rgb, amplitude,
+    /// depth)`, the last two on the ToF grid.
+    pub(crate) fn textured_scene(truth: &Calibration) -> (Array3<u8>, Array2<f32>, Array2<f32>) {
         let (h, w) = (160, 220);
         // Discs give edges in every direction (straight edges alone are ambiguous along
         // themselves and are rightly rejected).
@@ -338,13 +338,7 @@ mod tests {
             let base = (60.0 + 50.0 * (z * 5.0).cos().abs() * (k as f32 + 1.0)) as u8;
             base.saturating_add(if (x / 5) % 2 == 0 && z > 2.5 { 20 } else { 0 })
         });
-        let truth = Calibration {
-            tx: 6.0,
-            ty: -2.0,
-            cx: 3.0,
-            cy: 1.5,
-        };
-        let mut view = synthesize_view(rgb.view(), depth.view(), &truth);
+        let mut view = synthesize_view(rgb.view(), depth.view(), truth);
         // A real RGB camera has no disocclusion holes: fill them from the farther neighbour
         // along the row (the background that was hidden), as the scene would show.
         for y in 0..h {
@@ -370,8 +364,23 @@ mod tests {
                 }
             }
         }
+        (view.rgb, amplitude, depth)
+    }
+
+    /// Boxes at three depths in front of a wall; RGB and amplitude share the boundaries but not
+    /// the interior pattern. The RGB view is synthesised with a known calibration; the edge
+    /// matcher must recover it to within a pixel over the depth range.
+    #[test]
+    fn recovers_a_known_calibration_on_a_textured_scene() {
+        let truth = Calibration {
+            tx: 6.0,
+            ty: -2.0,
+            cx: 3.0,
+            cy: 1.5,
+        };
+        let (rgb, amplitude, depth) = textured_scene(&truth);
         let (fit, n) = estimate_calibration(
-            view.rgb.view(),
+            rgb.view(),
             amplitude.view(),
             depth.view(),
             &EdgeMatchParams::default(),

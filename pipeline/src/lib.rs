@@ -4,6 +4,7 @@
 //! - [`calibration`]: the weak-calibration flow model `W = t / z + c`;
 //! - [`frame`]: in-memory images of one RGB-D frame;
 //! - [`crossmodal`]: classical RGB↔amplitude edge matching (a baseline);
+//! - [`direct`]: direct fit of the calibration to all edge pixels at once (edge correlation);
 //! - [`capture`]: the capture-directory format (read, validate, write);
 //! - [`geometry`]: warping, least-squares calibration, depth↔flow, forward splatting;
 //! - [`metrics`]: AEPE and the paper's quantile-split depth MAE;
@@ -17,6 +18,7 @@ pub mod align;
 pub mod calibration;
 pub mod capture;
 pub mod crossmodal;
+pub mod direct;
 #[cfg(feature = "inference")]
 pub mod dear;
 pub mod evaluate;

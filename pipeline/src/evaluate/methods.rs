@@ -6,6 +6,7 @@ use ndarray::Array2;
 
 use crate::align::StaticAligner;
 use crate::crossmodal::{estimate_calibration_or, EdgeMatchParams};
+use crate::direct::{estimate_calibration_direct, DirectFitParams};
 use crate::filter::ClassicalRefiner;
 use crate::frame::Flow;
 use crate::{Calibration, RgbdFrame};
@@ -23,6 +24,11 @@ pub enum Method {
     EdgeMatching,
     /// Edge matching + the classical filter.
     EdgeMatchingClassical,
+    /// Calibration fitted per frame directly to all edge pixels (edge-map correlation,
+    /// coarse-to-fine; [`crate::direct`]), the factory calibration when the fit is not confident.
+    DirectFit,
+    /// Direct fit + the classical filter.
+    DirectFitClassical,
     /// Aligned with the frame's *true* calibration (an upper bound for alignment, needs the
     /// capture's per-frame `perturbation`).
     OracleCalibration,
@@ -30,12 +36,14 @@ pub enum Method {
 
 impl Method {
     /// Every classical method, in table order.
-    pub const CLASSICAL: [Method; 6] = [
+    pub const CLASSICAL: [Method; 8] = [
         Method::RawTof,
         Method::StaticCalibration,
         Method::StaticClassical,
         Method::EdgeMatching,
         Method::EdgeMatchingClassical,
+        Method::DirectFit,
+        Method::DirectFitClassical,
         Method::OracleCalibration,
     ];
 
@@ -47,6 +55,8 @@ impl Method {
             Method::StaticClassical => "static+classical-filter",
             Method::EdgeMatching => "edge-matching",
             Method::EdgeMatchingClassical => "edge-matching+classical-filter",
+            Method::DirectFit => "direct-fit",
+            Method::DirectFitClassical => "direct-fit+classical-filter",
             Method::OracleCalibration => "oracle-calibration",
         }
     }
@@ -73,6 +83,7 @@ pub struct MethodRunner {
     aligner: StaticAligner,
     refiner: ClassicalRefiner,
     edge_params: EdgeMatchParams,
+    direct_params: DirectFitParams,
 }
 
 impl MethodRunner {
@@ -83,6 +94,7 @@ impl MethodRunner {
             aligner: StaticAligner::new(height, width),
             refiner: ClassicalRefiner::default(),
             edge_params: EdgeMatchParams::default(),
+            direct_params: DirectFitParams::default(),
         }
     }
 
@@ -111,6 +123,16 @@ impl MethodRunner {
                     self.initial,
                 );
                 (c, method == Method::EdgeMatchingClassical)
+            }
+            Method::DirectFit | Method::DirectFitClassical => {
+                let fit = estimate_calibration_direct(
+                    frame.rgb.view(),
+                    frame.amplitude.view(),
+                    frame.depth.view(),
+                    self.initial,
+                    &self.direct_params,
+                );
+                (fit.calibration, method == Method::DirectFitClassical)
             }
             Method::OracleCalibration => (frame.perturbation?, false),
         };

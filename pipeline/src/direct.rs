@@ -1,0 +1,1236 @@
+//! Direct alignment: fit the four calibration numbers `(t_x, t_y, c_x, c_y)` against every edge
+//! pixel of the frame at once, instead of matching patches first and fitting a line to the
+//! matches afterwards ([`crossmodal`](crate::crossmodal)).
+//!
+//! # Why
+//!
+//! The RGB→ToF flow of a frame is not a free field: it is `W = t / z + c`, four numbers, with
+//! the depth `z` known at every ToF pixel. Patch matching (or a dense optical flow) estimates a
+//! free displacement per patch, throws away the ones it is unsure of, and only then imposes the
+//! model; a straight edge, a weak edge or a repeated pattern gives nothing or an outlier. Fitting
+//! the four numbers directly lets every edge pixel vote — a straight edge constrains the flow
+//! across itself, and edges in different directions and at different depths together pin all
+//! four parameters — and needs no match to be unambiguous on its own.
+//!
+//! # How
+//!
+//! - **Edge maps.** RGB and near-infrared intensities differ, object boundaries do not, so both
+//!   sides are compared as gradient magnitudes (as in the edge matcher): of the RGB grey image
+//!   on the RGB grid, and of `log amplitude` on the ToF grid. The logarithm makes an edge's
+//!   strength independent of distance; with `√amplitude` (the edge matcher's choice) the
+//!   nearest, brightest objects own most of the edge energy, and their flow is the largest and
+//!   the least reliable (measured on the tuning set below: mean AEPE 3.3 → 2.3 px at σ = 2).
+//!   Depth-discontinuity edges can be added (`depth_edge_weight`); they did not help.
+//! - **Mapping.** A ToF pixel `q` with depth `z` lands in the RGB view at `p(q) = q − t/z − c`
+//!   (the inverse of "RGB pixel `p` sees ToF pixel `p + W`", the rule
+//!   [`synthesize_view`](crate::geometry::synthesize_view) and the
+//!   [`StaticAligner`](crate::align::StaticAligner) splat with; checked by a unit test).
+//! - **Objective.** The correlation (zero-normalised cross-correlation) between the ToF edge map
+//!   `T(q)` and the RGB edge map sampled bilinearly at `p(q)` (zero outside the image, so the
+//!   pixel set never shrinks and a small overlap cannot win by chance), over the ToF pixels with
+//!   valid depth: invariant to the different contrasts of the two modalities. It is maximised
+//!   as the equivalent least squares `min Σ (α·I(p(q; θ)) + β − T(q))²` over `θ = (t, c)` and
+//!   the photometric gain/offset `(α, β)` (at the optimal `α, β` the residual is
+//!   `‖T − T̄‖²·(1 − ρ²)`), by Gauss–Newton with a halving step.
+//! - **Coarse to fine.** Both edge maps are blurred and reduced to a Gaussian pyramid, which
+//!   widens the basin. At the coarsest level (at most 160 px wide) an exhaustive search over
+//!   whole-pixel offsets of `c` (`t` held; a candidate costs four multiply-adds per pixel, as
+//!   the bilinear weights of a pixel do not change with a whole-pixel shift) scores all pixels
+//!   and, in the same pass, six layers of inverse depth separately. The correlation along `t`
+//!   is sharply peaked (near objects move by `t/z`, tens of pixels, for a small change of `t`),
+//!   and `t` held at its initial value is a local maximum, so Gauss–Newton alone cannot find
+//!   `t`: the line `flow = t/z + c` through the layers' peaks (every pair tried, each scored by
+//!   the layers' correlations at the offsets it predicts) gives the start point that has it.
+//!   The best global offsets and that line are refined by Gauss–Newton at the coarsest level,
+//!   the best one then level by level up to full resolution.
+//! - **When `t` is not observable.** If the edges' inverse depths barely spread (a wall facing
+//!   the camera), `t` and `c` cannot be told apart and `t` is held at its initial value; only
+//!   `c` is fitted.
+//! - **Fallback.** If the final correlation is low, or not better than the initial
+//!   calibration's, the initial (factory) calibration is returned and flagged.
+//!
+//! The simulator's misaligned test sets leave the disocclusions of the RGB view black. Their
+//! far side is where the background next to an occluding contour lands, so every pixel moves
+//! with its own depth (`contour_radius` 0); on a real camera, where the hidden background is
+//! seen, a contour moves with the nearer surface only and a radius of a few pixels fits better
+//! (the unit test's scene, whose holes are filled).
+
+use ndarray::{Array2, ArrayView2, ArrayView3};
+
+use crate::calibration::Calibration;
+use crate::crossmodal::{gradient_magnitude, rgb_to_gray};
+use crate::geometry::surface::is_valid_depth;
+
+/// Settings of [`estimate_calibration_direct`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DirectFitParams {
+    /// The coarsest pyramid level is the first at most twice this wide, px (160 px for
+    /// 320×240; 40 here, a 80 px search level, was 4× faster and clearly less accurate on the
+    /// tuning set).
+    pub coarse_width: usize,
+    /// Half size of the exhaustive search of `c` at the coarsest level, full-resolution px.
+    pub search_radius_px: f32,
+    /// Local maxima of the search refined at the coarsest level before one is kept.
+    pub search_candidates: usize,
+    /// Gaussian blur of both edge maps at every level, in that level's px.
+    pub blur_sigma: f32,
+    /// Weight of the depth-discontinuity edges in the ToF edge map (0 = amplitude only).
+    pub depth_edge_weight: f32,
+    /// A ToF pixel moves with the nearest valid surface within this radius (level px): the
+    /// blurred edge of an occluding contour spreads onto the background, but the contour moves
+    /// with the foreground. 0 (each pixel its own depth) for the simulator's sets, whose RGB
+    /// views leave disocclusions black (see the module docs); a few px for a real camera.
+    pub contour_radius: usize,
+    /// Edges of `log amplitude` (else of `√amplitude`).
+    pub log_amplitude: bool,
+    /// Zero the RGB edges around black bands connected to the image border (the border a
+    /// synthesised view moved away from). Off: on the tuning set it helped the median frame
+    /// and hurt the mean.
+    pub suppress_border_holes: bool,
+    /// Gauss–Newton iterations per level (at most; stops once the flow moves < 0.01 px).
+    pub iterations: usize,
+    /// Scale of the Cauchy loss on the residual of the edge maps, in units of the RMS residual
+    /// at the start of each level (0 = plain least squares): edges seen in one modality only
+    /// count less. Off: it made every tried scene worse (the largest residuals are the edges
+    /// that do match, with a gain mismatch).
+    pub robust_k: f32,
+    /// Finest level refined (0 = full resolution).
+    pub finest_level: usize,
+    /// Smallest edge-weighted relative spread `std(1/z) / mean(1/z)` for which `t` is fitted;
+    /// below it `t` stays at its initial value.
+    pub min_rel_inv_depth_spread: f32,
+    /// Smallest final correlation for the fit to be used.
+    pub min_correlation: f32,
+    /// The fit must beat the initial calibration's correlation by this much to be used.
+    pub min_gain: f32,
+}
+
+impl Default for DirectFitParams {
+    fn default() -> Self {
+        DirectFitParams {
+            coarse_width: 80,
+            search_radius_px: 32.0,
+            search_candidates: 3,
+            blur_sigma: 1.0,
+            depth_edge_weight: 0.0,
+            contour_radius: 0,
+            log_amplitude: true,
+            suppress_border_holes: false,
+            iterations: 10,
+            robust_k: 0.0,
+            finest_level: 0,
+            min_rel_inv_depth_spread: 0.1,
+            min_correlation: 0.2,
+            min_gain: 0.0,
+        }
+    }
+}
+
+/// The result of [`estimate_calibration_direct`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DirectFit {
+    /// The calibration to align with: the fit, or the initial one when [`fell_back`](Self::fell_back).
+    pub calibration: Calibration,
+    /// Edge-map correlation of the returned calibration at the finest level refined.
+    pub correlation: f32,
+    /// Edge-map correlation of the initial calibration at the same level.
+    pub initial_correlation: f32,
+    /// Whether the fit was rejected and `calibration` is the initial one.
+    pub fell_back: bool,
+    /// Whether `t` was fitted (false: held at its initial value, too little depth spread).
+    pub baseline_fitted: bool,
+}
+
+/// One pyramid level: the ToF side (edge map, inverse depth of the nearest surface, 0 =
+/// invalid) and the RGB side (edge map and its x/y derivatives, interleaved).
+struct Level {
+    scale: f32,
+    tof_w: usize,
+    tof_h: usize,
+    t: Vec<f32>,
+    inv_depth: Vec<f32>,
+    rgb_w: usize,
+    rgb_h: usize,
+    rgb: Vec<[f32; 3]>,
+}
+
+/// Fits the calibration directly to the edges of one frame; see the module docs.
+///
+/// `rgb` is `(H, W, 3)` on the RGB grid; `amplitude` and `depth` (metres, 0 = invalid) share the
+/// ToF grid. `initial` is the starting point and the fallback.
+pub fn estimate_calibration_direct(
+    rgb: ArrayView3<u8>,
+    amplitude: ArrayView2<f32>,
+    depth: ArrayView2<f32>,
+    initial: Calibration,
+    params: &DirectFitParams,
+) -> DirectFit {
+    let fallback = |correlation: f32| DirectFit {
+        calibration: initial,
+        correlation,
+        initial_correlation: correlation,
+        fell_back: true,
+        baseline_fitted: false,
+    };
+    assert_eq!(
+        amplitude.dim(),
+        depth.dim(),
+        "estimate_calibration_direct: amplitude and depth shapes differ"
+    );
+    let (th, tw) = depth.dim();
+    let (rh, rw, _) = rgb.dim();
+    if th < 8 || tw < 8 || rh < 8 || rw < 8 {
+        return fallback(0.0);
+    }
+    let pyramid = build_pyramid(rgb, amplitude, depth, params);
+    let coarsest = pyramid.len() - 1;
+    let finest = params.finest_level.min(coarsest);
+
+    let initial_theta = Theta::from(initial);
+    let fine = &pyramid[finest];
+    let initial_correlation = correlation_at(fine, &initial_theta).unwrap_or(0.0);
+
+    // Is t observable? Edge-weighted spread of the inverse depth at the finest level.
+    let fit_t = rel_inv_depth_spread(fine) >= params.min_rel_inv_depth_spread as f64;
+
+    // Exhaustive search of c at the coarsest level, t held.
+    let top = &pyramid[coarsest];
+    let candidates = search_offsets(top, &initial_theta, params);
+    let mut best: Option<(Theta, f64)> = None;
+    for c in candidates {
+        let (theta, corr) = gauss_newton(top, c, fit_t, params.iterations, params.robust_k);
+        if best.is_none_or(|(_, b)| corr > b) {
+            best = Some((theta, corr));
+        }
+    }
+    let Some((mut theta, mut corr)) = best else {
+        return fallback(initial_correlation as f32);
+    };
+    for level in pyramid[finest..coarsest].iter().rev() {
+        (theta, corr) = gauss_newton(level, theta, fit_t, params.iterations, params.robust_k);
+    }
+    let corr = corr as f32;
+    if !corr.is_finite()
+        || corr < params.min_correlation
+        || corr <= initial_correlation as f32 + params.min_gain
+    {
+        let mut f = fallback(initial_correlation as f32);
+        f.baseline_fitted = false;
+        return f;
+    }
+    DirectFit {
+        calibration: theta.into(),
+        correlation: corr,
+        initial_correlation: initial_correlation as f32,
+        fell_back: false,
+        baseline_fitted: fit_t,
+    }
+}
+
+/// `(t_x, t_y, c_x, c_y, α, β)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Theta {
+    p: [f64; 6],
+}
+
+impl From<Calibration> for Theta {
+    fn from(c: Calibration) -> Self {
+        Theta {
+            p: [c.tx as f64, c.ty as f64, c.cx as f64, c.cy as f64, 1.0, 0.0],
+        }
+    }
+}
+
+impl From<Theta> for Calibration {
+    fn from(t: Theta) -> Self {
+        Calibration {
+            tx: t.p[0] as f32,
+            ty: t.p[1] as f32,
+            cx: t.p[2] as f32,
+            cy: t.p[3] as f32,
+        }
+    }
+}
+
+fn build_pyramid(
+    rgb: ArrayView3<u8>,
+    amplitude: ArrayView2<f32>,
+    depth: ArrayView2<f32>,
+    params: &DirectFitParams,
+) -> Vec<Level> {
+    let (th, tw) = depth.dim();
+    let (rh, rw, _) = rgb.dim();
+    // RGB side.
+    let gray = rgb_to_gray(rgb);
+    let mut e_rgb = gradient_magnitude(gray.view());
+    if params.suppress_border_holes {
+        suppress_border_holes(rgb, &mut e_rgb);
+    }
+    // ToF side: amplitude edges, depth edges.
+    // log: an edge's strength does not depend on the distance (sqrt would still weigh the
+    // nearest objects, the brightest, most).
+    let amp = if params.log_amplitude {
+        amplitude.mapv(|a| (a.max(0.0) + 1.0).ln())
+    } else {
+        amplitude.mapv(|a| a.max(0.0).sqrt())
+    };
+    let mut e_tof = gradient_magnitude(amp.view());
+    if params.depth_edge_weight > 0.0 {
+        let e_depth = depth_edges(depth);
+        let k = params.depth_edge_weight;
+        e_tof.zip_mut_with(&e_depth, |a, &d| *a = a.max(k * d));
+    }
+    let inv = inverse_depth(depth);
+
+    let mut levels = Vec::new();
+    let mut t_img = into_vec(e_tof);
+    let mut a_img = inv;
+    let mut i_img = into_vec(e_rgb);
+    let (mut tw_l, mut th_l, mut rw_l, mut rh_l) = (tw, th, rw, rh);
+    let mut scale = 1.0f32;
+    loop {
+        let t_blur = blur(&t_img, tw_l, th_l, params.blur_sigma);
+        let i_blur = blur(&i_img, rw_l, rh_l, params.blur_sigma);
+        levels.push(Level {
+            scale,
+            tof_w: tw_l,
+            tof_h: th_l,
+            t: t_blur.clone(),
+            inv_depth: nearest_surface(&a_img, tw_l, th_l, params.contour_radius),
+            rgb_w: rw_l,
+            rgb_h: rh_l,
+            rgb: with_gradient(&i_blur, rw_l, rh_l),
+        });
+        if tw_l <= 2 * params.coarse_width.max(8) || th_l < 16 || rh_l < 16 || rw_l < 16 {
+            break;
+        }
+        t_img = downsample(&t_blur, tw_l, th_l, |v| 0.25 * (v[0] + v[1] + v[2] + v[3]));
+        a_img = downsample(&a_img, tw_l, th_l, |v| v[0].max(v[1]).max(v[2]).max(v[3]));
+        i_img = downsample(&i_blur, rw_l, rh_l, |v| 0.25 * (v[0] + v[1] + v[2] + v[3]));
+        (tw_l, th_l, rw_l, rh_l) = (tw_l / 2, th_l / 2, rw_l / 2, rh_l / 2);
+        scale *= 2.0;
+    }
+    levels
+}
+
+fn into_vec(a: Array2<f32>) -> Vec<f32> {
+    if a.is_standard_layout() {
+        a.into_raw_vec_and_offset().0
+    } else {
+        a.iter().copied().collect()
+    }
+}
+
+/// A synthesised view (the simulator's misaligned test sets) is black (every channel 0) along
+/// the border it moved away from; the edge of that band is not a scene edge, and a camera has
+/// no such band. Zero the edges around the black pixels connected to the image border (holes
+/// inside the image, disocclusions, are left: their far side is where the background next to
+/// an occluding contour lands).
+fn suppress_border_holes(rgb: ArrayView3<u8>, edges: &mut Array2<f32>) {
+    let (h, w, _) = rgb.dim();
+    let black = |y: usize, x: usize| (0..rgb.dim().2).all(|k| rgb[[y, x, k]] == 0);
+    let mut seen = vec![false; h * w];
+    let mut stack = Vec::new();
+    for y in 0..h {
+        for x in 0..w {
+            if (y == 0 || x == 0 || y == h - 1 || x == w - 1) && black(y, x) {
+                seen[y * w + x] = true;
+                stack.push((y, x));
+            }
+        }
+    }
+    if stack.is_empty() {
+        return;
+    }
+    while let Some((y, x)) = stack.pop() {
+        for yy in y.saturating_sub(1)..(y + 2).min(h) {
+            for xx in x.saturating_sub(1)..(x + 2).min(w) {
+                edges[[yy, xx]] = 0.0;
+                if !seen[yy * w + xx] && black(yy, xx) {
+                    seen[yy * w + xx] = true;
+                    stack.push((yy, xx));
+                }
+            }
+        }
+    }
+}
+
+/// Sobel gradient magnitude of `log z` where the whole 3×3 neighbourhood is valid (0
+/// elsewhere), normalised like [`gradient_magnitude`] (99th percentile → 1, clipped).
+fn depth_edges(depth: ArrayView2<f32>) -> Array2<f32> {
+    let (h, w) = depth.dim();
+    let logz = depth.mapv(|z| if is_valid_depth(z) { z.ln() } else { f32::NAN });
+    let mut g = Array2::<f32>::zeros((h, w));
+    for y in 1..h.saturating_sub(1) {
+        for x in 1..w.saturating_sub(1) {
+            let p = |dy: usize, dx: usize| logz[[y + dy - 1, x + dx - 1]];
+            let gx = (p(0, 2) + 2.0 * p(1, 2) + p(2, 2)) - (p(0, 0) + 2.0 * p(1, 0) + p(2, 0));
+            let gy = (p(2, 0) + 2.0 * p(2, 1) + p(2, 2)) - (p(0, 0) + 2.0 * p(0, 1) + p(0, 2));
+            let m = (gx * gx + gy * gy).sqrt();
+            g[[y, x]] = if m.is_finite() { m } else { 0.0 };
+        }
+    }
+    let mut sample: Vec<f32> = g.iter().step_by(3).copied().filter(|v| *v > 0.0).collect();
+    if sample.is_empty() {
+        return g;
+    }
+    let k = (sample.len() * 99 / 100).min(sample.len() - 1);
+    let (_, p99, _) = sample.select_nth_unstable_by(k, f32::total_cmp);
+    let scale = p99.max(1e-6);
+    g.mapv_inplace(|v| (v / scale).min(1.0));
+    g
+}
+
+/// `1 / z`, 0 where the depth is invalid.
+fn inverse_depth(depth: ArrayView2<f32>) -> Vec<f32> {
+    depth
+        .iter()
+        .map(|&z| if is_valid_depth(z) { 1.0 / z } else { 0.0 })
+        .collect()
+}
+
+/// The largest inverse depth (nearest surface) within `r` px (a square window) of every valid
+/// pixel; 0 where the pixel itself is invalid.
+fn nearest_surface(inv: &[f32], w: usize, h: usize, r: usize) -> Vec<f32> {
+    if r == 0 {
+        return inv.to_vec();
+    }
+    let mut tmp = vec![0.0f32; w * h];
+    for y in 0..h {
+        let row = &inv[y * w..(y + 1) * w];
+        for x in 0..w {
+            let (x0, x1) = (x.saturating_sub(r), (x + r).min(w - 1));
+            tmp[y * w + x] = row[x0..=x1].iter().copied().fold(0.0, f32::max);
+        }
+    }
+    let mut out = vec![0.0f32; w * h];
+    for y in 0..h {
+        let (y0, y1) = (y.saturating_sub(r), (y + r).min(h - 1));
+        for x in 0..w {
+            if inv[y * w + x] > 0.0 {
+                out[y * w + x] = (y0..=y1).map(|yy| tmp[yy * w + x]).fold(0.0, f32::max);
+            }
+        }
+    }
+    out
+}
+
+/// Separable Gaussian blur with clamped borders.
+fn blur(img: &[f32], w: usize, h: usize, sigma: f32) -> Vec<f32> {
+    if sigma <= 0.0 {
+        return img.to_vec();
+    }
+    let r = (3.0 * sigma).ceil() as usize;
+    let mut k: Vec<f32> = (0..=2 * r)
+        .map(|i| {
+            let d = i as f32 - r as f32;
+            (-0.5 * d * d / (sigma * sigma)).exp()
+        })
+        .collect();
+    let s: f32 = k.iter().sum();
+    k.iter_mut().for_each(|v| *v /= s);
+    let mut tmp = vec![0.0f32; w * h];
+    for y in 0..h {
+        let row = &img[y * w..(y + 1) * w];
+        let out = &mut tmp[y * w..(y + 1) * w];
+        for x in 0..w {
+            let mut acc = 0.0;
+            if x >= r && x + r < w {
+                for (i, &kv) in k.iter().enumerate() {
+                    acc += kv * row[x + i - r];
+                }
+            } else {
+                for (i, &kv) in k.iter().enumerate() {
+                    let xx = (x as isize + i as isize - r as isize).clamp(0, w as isize - 1);
+                    acc += kv * row[xx as usize];
+                }
+            }
+            out[x] = acc;
+        }
+    }
+    let mut out = vec![0.0f32; w * h];
+    for y in 0..h {
+        let dst = &mut out[y * w..(y + 1) * w];
+        for (i, &kv) in k.iter().enumerate() {
+            let yy = (y as isize + i as isize - r as isize).clamp(0, h as isize - 1) as usize;
+            let src = &tmp[yy * w..(yy + 1) * w];
+            for (d, &s) in dst.iter_mut().zip(src) {
+                *d += kv * s;
+            }
+        }
+    }
+    out
+}
+
+/// 2×2 reduction with `f` over the block `[(0,0), (0,1), (1,0), (1,1)]`: coarse pixel `i` is
+/// centred on fine `2i + 0.5`.
+fn downsample(img: &[f32], w: usize, h: usize, f: impl Fn([f32; 4]) -> f32) -> Vec<f32> {
+    let (w2, h2) = (w / 2, h / 2);
+    let mut out = Vec::with_capacity(w2 * h2);
+    for y in 0..h2 {
+        let (r0, r1) = (&img[2 * y * w..], &img[(2 * y + 1) * w..]);
+        for x in 0..w2 {
+            out.push(f([r0[2 * x], r0[2 * x + 1], r1[2 * x], r1[2 * x + 1]]));
+        }
+    }
+    out
+}
+
+/// The image and its central-difference derivatives, interleaved.
+fn with_gradient(img: &[f32], w: usize, h: usize) -> Vec<[f32; 3]> {
+    let mut out = vec![[0.0f32; 3]; w * h];
+    for y in 0..h {
+        let (ym, yp) = (y.saturating_sub(1), (y + 1).min(h - 1));
+        for x in 0..w {
+            let (xm, xp) = (x.saturating_sub(1), (x + 1).min(w - 1));
+            let gx = (img[y * w + xp] - img[y * w + xm]) / (xp - xm).max(1) as f32;
+            let gy = (img[yp * w + x] - img[ym * w + x]) / (yp - ym).max(1) as f32;
+            out[y * w + x] = [img[y * w + x], gx, gy];
+        }
+    }
+    out
+}
+
+/// Bilinear sample of the interleaved RGB side at `(x, y)` (level px), `None` outside the
+/// convex hull of the pixel centres.
+#[inline]
+fn sample(level: &Level, x: f32, y: f32) -> Option<[f32; 3]> {
+    let (w, h) = (level.rgb_w, level.rgb_h);
+    if !(x >= 0.0 && y >= 0.0 && x <= (w - 1) as f32 && y <= (h - 1) as f32) {
+        return None;
+    }
+    let x0 = (x as usize).min(w - 2);
+    let y0 = (y as usize).min(h - 2);
+    let (fx, fy) = (x - x0 as f32, y - y0 as f32);
+    let i = y0 * w + x0;
+    let (a, b, c, d) = (
+        level.rgb[i],
+        level.rgb[i + 1],
+        level.rgb[i + w],
+        level.rgb[i + w + 1],
+    );
+    let (w00, w01, w10, w11) = (
+        (1.0 - fx) * (1.0 - fy),
+        fx * (1.0 - fy),
+        (1.0 - fx) * fy,
+        fx * fy,
+    );
+    let mut out = [0.0f32; 3];
+    for k in 0..3 {
+        out[k] = w00 * a[k] + w01 * b[k] + w10 * c[k] + w11 * d[k];
+    }
+    Some(out)
+}
+
+/// Where ToF pixel `(x, y)` of `level` with inverse depth `a` lands in the RGB view, level px.
+#[inline]
+fn landing(level: &Level, theta: &Theta, x: usize, y: usize, a: f32) -> (f32, f32) {
+    let s = level.scale as f64;
+    let u = (theta.p[0] * a as f64 + theta.p[2]) / s;
+    let v = (theta.p[1] * a as f64 + theta.p[3]) / s;
+    (x as f32 - u as f32, y as f32 - v as f32)
+}
+
+/// Running sums for a correlation.
+#[derive(Default, Clone, Copy)]
+struct Corr {
+    n: f64,
+    st: f64,
+    stt: f64,
+    si: f64,
+    sii: f64,
+    sti: f64,
+}
+
+impl Corr {
+    #[inline]
+    fn add(&mut self, t: f64, i: f64) {
+        self.n += 1.0;
+        self.st += t;
+        self.stt += t * t;
+        self.si += i;
+        self.sii += i * i;
+        self.sti += t * i;
+    }
+
+    fn merge(&mut self, o: &Corr) {
+        self.n += o.n;
+        self.st += o.st;
+        self.stt += o.stt;
+        self.si += o.si;
+        self.sii += o.sii;
+        self.sti += o.sti;
+    }
+
+    fn value(&self) -> Option<f64> {
+        if self.n < 16.0 {
+            return None;
+        }
+        let vt = self.stt - self.st * self.st / self.n;
+        let vi = self.sii - self.si * self.si / self.n;
+        let c = self.sti - self.st * self.si / self.n;
+        (vt > 1e-9 && vi > 1e-9).then(|| c / (vt * vi).sqrt())
+    }
+
+    /// Least-squares gain and offset of `T ≈ α·I + β`.
+    fn gain_offset(&self) -> (f64, f64) {
+        let vi = self.sii - self.si * self.si / self.n;
+        let c = self.sti - self.st * self.si / self.n;
+        let alpha = if vi > 1e-12 { c / vi } else { 0.0 };
+        (alpha, (self.st - alpha * self.si) / self.n)
+    }
+}
+
+fn correlation_at(level: &Level, theta: &Theta) -> Option<f64> {
+    let mut c = Corr::default();
+    for y in 0..level.tof_h {
+        for x in 0..level.tof_w {
+            let i = y * level.tof_w + x;
+            let a = level.inv_depth[i];
+            if a <= 0.0 {
+                continue;
+            }
+            let (px, py) = landing(level, theta, x, y, a);
+            let s = sample(level, px, py).unwrap_or([0.0; 3]);
+            c.add(level.t[i] as f64, s[0] as f64);
+        }
+    }
+    c.value()
+}
+
+/// `std(1/z) / mean(1/z)` over the valid ToF pixels, weighted by their edge strength.
+fn rel_inv_depth_spread(level: &Level) -> f64 {
+    let (mut sw, mut sa, mut saa) = (0.0f64, 0.0f64, 0.0f64);
+    for (&t, &a) in level.t.iter().zip(&level.inv_depth) {
+        if a > 0.0 {
+            let (t, a) = (t as f64, a as f64);
+            sw += t;
+            sa += t * a;
+            saa += t * a * a;
+        }
+    }
+    if sw <= 0.0 {
+        return 0.0;
+    }
+    let mean = sa / sw;
+    let var = (saa / sw - mean * mean).max(0.0);
+    var.sqrt() / mean
+}
+
+/// Best local maxima (3×3) of a `side × side` score grid, best first: `(score, i, j)`.
+fn local_maxima(scores: &[f64], side: usize, keep: usize) -> Vec<(f64, usize, usize)> {
+    let mut peaks = Vec::new();
+    for j in 0..side {
+        for i in 0..side {
+            let s = scores[j * side + i];
+            if !s.is_finite() {
+                continue;
+            }
+            let mut is_max = true;
+            'n: for jj in j.saturating_sub(1)..(j + 2).min(side) {
+                for ii in i.saturating_sub(1)..(i + 2).min(side) {
+                    let o = scores[jj * side + ii];
+                    if (jj, ii) != (j, i) && (o > s || (o == s && (jj, ii) < (j, i))) {
+                        is_max = false;
+                        break 'n;
+                    }
+                }
+            }
+            if is_max {
+                peaks.push((s, i, j));
+            }
+        }
+    }
+    peaks.sort_by(|a, b| b.0.total_cmp(&a.0));
+    peaks.truncate(keep);
+    peaks
+}
+
+/// Sub-pixel offset of a peak along one axis from its two neighbours (parabola), in [−½, ½].
+fn parabola(m: f64, c: f64, p: f64) -> f64 {
+    let denom = m - 2.0 * c + p;
+    if denom < 0.0 && m.is_finite() && p.is_finite() {
+        (0.5 * (m - p) / denom).clamp(-0.5, 0.5)
+    } else {
+        0.0
+    }
+}
+
+/// Exhaustive search of a whole-pixel offset of `c` around `initial` (t held) at `level`,
+/// scored over all pixels and, in the same pass, separately over layers of inverse depth.
+/// Returns the starting points for Gauss–Newton: the best local maxima of the global score,
+/// and the robust line `flow = t·(1/z) + c` through the layers' best offsets (which finds `t`
+/// where the global search, `t` held, cannot: near objects move far from the rest).
+fn search_offsets(level: &Level, initial: &Theta, params: &DirectFitParams) -> Vec<Theta> {
+    const LAYERS: usize = 6;
+    let r = (params.search_radius_px / level.scale).round().max(0.0) as i32;
+    let side = (2 * r + 1) as usize;
+    let (w, h) = (level.rgb_w as i32, level.rgb_h as i32);
+    // Per valid ToF pixel: the whole-pixel part of its landing point (at the centre of the
+    // search), the bilinear weights (the same for every whole-pixel shift), T and its layer.
+    struct Point {
+        x0: i32,
+        y0: i32,
+        w: [f32; 4],
+        t: f32,
+        layer: u8,
+    }
+    // Layer bounds: quantiles of the inverse depth over the edge pixels.
+    let mut edge_a: Vec<f32> = level
+        .t
+        .iter()
+        .zip(&level.inv_depth)
+        .filter(|(&t, &a)| a > 0.0 && t > 0.1)
+        .map(|(_, &a)| a)
+        .collect();
+    edge_a.sort_by(f32::total_cmp);
+    let bounds: Vec<f32> = if edge_a.len() >= 10 * LAYERS {
+        (1..LAYERS)
+            .map(|k| edge_a[k * edge_a.len() / LAYERS])
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let layers = bounds.len() + 1;
+    let mut points = Vec::new();
+    for y in 0..level.tof_h {
+        for x in 0..level.tof_w {
+            let i = y * level.tof_w + x;
+            let a = level.inv_depth[i];
+            if a <= 0.0 {
+                continue;
+            }
+            let (px, py) = landing(level, initial, x, y, a);
+            if !(px.is_finite() && py.is_finite()) {
+                continue;
+            }
+            let (fx0, fy0) = (px.floor(), py.floor());
+            let (fx, fy) = (px - fx0, py - fy0);
+            points.push(Point {
+                x0: fx0 as i32,
+                y0: fy0 as i32,
+                w: [
+                    (1.0 - fx) * (1.0 - fy),
+                    fx * (1.0 - fy),
+                    (1.0 - fx) * fy,
+                    fx * fy,
+                ],
+                t: level.t[i],
+                layer: bounds.iter().filter(|&&b| a >= b).count() as u8,
+            });
+        }
+    }
+    let mut scores = vec![f64::NEG_INFINITY; side * side];
+    let mut layer_scores = vec![f64::NEG_INFINITY; layers * side * side];
+    let wi = w as usize;
+    let mut sums = vec![Corr::default(); layers];
+    for dy in -r..=r {
+        for dx in -r..=r {
+            sums.iter_mut().for_each(|c| *c = Corr::default());
+            for p in &points {
+                // The offset moves the landing point by −d.
+                let (x0, y0) = (p.x0 - dx, p.y0 - dy);
+                let v = if x0 < 0 || y0 < 0 || x0 + 1 >= w || y0 + 1 >= h {
+                    // Zero padding: the pixel set stays fixed (a small overlap must not win
+                    // by chance).
+                    0.0
+                } else {
+                    let i = (y0 * w + x0) as usize;
+                    p.w[0] * level.rgb[i][0]
+                        + p.w[1] * level.rgb[i + 1][0]
+                        + p.w[2] * level.rgb[i + wi][0]
+                        + p.w[3] * level.rgb[i + wi + 1][0]
+                };
+                sums[p.layer as usize].add(p.t as f64, v as f64);
+            }
+            let cell = ((dy + r) as usize) * side + (dx + r) as usize;
+            let mut all = Corr::default();
+            for (k, c) in sums.iter().enumerate() {
+                all.merge(c);
+                if let Some(v) = c.value() {
+                    layer_scores[k * side * side + cell] = v;
+                }
+            }
+            if let Some(v) = all.value() {
+                scores[cell] = v;
+            }
+        }
+    }
+    let scale = level.scale as f64;
+    let mut out: Vec<Theta> = local_maxima(&scores, side, params.search_candidates.max(1))
+        .into_iter()
+        .map(|(_, i, j)| {
+            let mut theta = *initial;
+            theta.p[2] += (i as f64 - r as f64) * scale;
+            theta.p[3] += (j as f64 - r as f64) * scale;
+            theta
+        })
+        .collect();
+    // The layers' line: through every pair of layer peaks (the best two of each layer), scored
+    // by the sum over the layers of their correlation at the offset the line predicts (a layer
+    // the line moves out of the search window adds nothing). Robust to layers whose own best
+    // offset is wrong, as near layers are when their flow exceeds the window.
+    if layers >= 2 {
+        let layer_a: Vec<f64> = (0..layers)
+            .map(|k| {
+                let lo = k * edge_a.len() / LAYERS;
+                let hi = ((k + 1) * edge_a.len() / LAYERS).min(edge_a.len());
+                edge_a[(lo + hi) / 2] as f64
+            })
+            .collect();
+        let grid = |k: usize| &layer_scores[k * side * side..(k + 1) * side * side];
+        // Peaks as offsets from the initial flow, level px.
+        let mut peaks: Vec<(usize, f64, f64)> = Vec::new();
+        for k in 0..layers {
+            let g = grid(k);
+            for (best, i, j) in local_maxima(g, side, 2) {
+                let at = |i: isize, j: isize| -> f64 {
+                    if i < 0 || j < 0 || i >= side as isize || j >= side as isize {
+                        f64::NEG_INFINITY
+                    } else {
+                        g[j as usize * side + i as usize]
+                    }
+                };
+                let (ii, jj) = (i as isize, j as isize);
+                let sx = parabola(at(ii - 1, jj), best, at(ii + 1, jj));
+                let sy = parabola(at(ii, jj - 1), best, at(ii, jj + 1));
+                peaks.push((k, i as f64 - r as f64 + sx, j as f64 - r as f64 + sy));
+            }
+        }
+        let score_line = |tu: f64, tv: f64, cu: f64, cv: f64| -> f64 {
+            (0..layers)
+                .map(|k| {
+                    let (du, dv) = (tu * layer_a[k] + cu, tv * layer_a[k] + cv);
+                    let (i, j) = ((du + r as f64).round(), (dv + r as f64).round());
+                    if i < 0.0 || j < 0.0 || i >= side as f64 || j >= side as f64 {
+                        return 0.0;
+                    }
+                    let v = grid(k)[j as usize * side + i as usize];
+                    if v.is_finite() {
+                        v.max(0.0)
+                    } else {
+                        0.0
+                    }
+                })
+                .sum()
+        };
+        let mut best_line: Option<(f64, [f64; 4])> = None;
+        for (n1, &(k1, u1, v1)) in peaks.iter().enumerate() {
+            for &(k2, u2, v2) in &peaks[n1 + 1..] {
+                let da = layer_a[k2] - layer_a[k1];
+                if k1 == k2 || da.abs() < 1e-3 {
+                    continue;
+                }
+                let (tu, tv) = ((u2 - u1) / da, (v2 - v1) / da);
+                let (cu, cv) = (u1 - tu * layer_a[k1], v1 - tv * layer_a[k1]);
+                let sc = score_line(tu, tv, cu, cv);
+                if best_line.is_none_or(|(b, _)| sc > b) {
+                    best_line = Some((sc, [tu, tv, cu, cv]));
+                }
+            }
+        }
+        if let Some((_, [tu, tv, cu, cv])) = best_line {
+            // Offsets (level px, relative to the initial flow) → calibration (full px).
+            let mut theta = *initial;
+            theta.p[0] += tu * scale;
+            theta.p[1] += tv * scale;
+            theta.p[2] += cu * scale;
+            theta.p[3] += cv * scale;
+            out.push(theta);
+        }
+    }
+    out
+}
+
+/// What one pass over a level at some `θ` gives.
+struct Pass {
+    /// Correlation sums (unweighted).
+    corr: Corr,
+    /// Gauss–Newton normal matrix `Σ w JᵀJ` in `(t_x, t_y, c_x, c_y, α, β)`.
+    hm: [[f64; 6]; 6],
+    /// Gradient `Σ w Jᵀ r`.
+    g: [f64; 6],
+    /// Robust cost `Σ ρ(r)` (`Σ r²/2` without a robust scale).
+    cost: f64,
+    /// `Σ r²`.
+    sse: f64,
+}
+
+/// One pass at `theta`: the correlation and the Gauss–Newton normal equations of
+/// `Σ ρ(α·I(p(q)) + β − T(q))`, with `ρ` the Cauchy loss of scale `k` (least squares if
+/// `k ≤ 0`).
+// Small dense linear algebra reads best with indices.
+#[allow(clippy::needless_range_loop)]
+fn normal_equations(level: &Level, theta: &Theta, k_robust: f32) -> Pass {
+    let mut corr = Corr::default();
+    let mut hm = [[0.0f64; 6]; 6];
+    let mut g = [0.0f64; 6];
+    let (mut cost, mut sse) = (0.0f64, 0.0f64);
+    let (alpha, beta) = (theta.p[4] as f32, theta.p[5] as f32);
+    let inv_s = 1.0 / level.scale;
+    let inv_k2 = if k_robust > 0.0 {
+        1.0 / (k_robust * k_robust)
+    } else {
+        0.0
+    };
+    // f32 accumulation per row, f64 across rows.
+    let mut hr = [[0.0f32; 6]; 6];
+    let mut gr = [0.0f32; 6];
+    let (mut cost_r, mut sse_r) = (0.0f32, 0.0f32);
+    for y in 0..level.tof_h {
+        for x in 0..level.tof_w {
+            let i = y * level.tof_w + x;
+            let a = level.inv_depth[i];
+            if a <= 0.0 {
+                continue;
+            }
+            let (px, py) = landing(level, theta, x, y, a);
+            let [iv, ix, iy] = sample(level, px, py).unwrap_or([0.0; 3]);
+            let t = level.t[i];
+            corr.add(t as f64, iv as f64);
+            let r = alpha * iv + beta - t;
+            let r2 = r * r;
+            sse_r += r2;
+            let wgt = if inv_k2 > 0.0 {
+                let u = r2 * inv_k2;
+                cost_r += 0.5 * (1.0 + u).ln() / inv_k2;
+                1.0 / (1.0 + u)
+            } else {
+                cost_r += 0.5 * r2;
+                1.0
+            };
+            // p = q − (t·a + c)/s: ∂p/∂t = −a/s, ∂p/∂c = −1/s.
+            let gx = -alpha * ix * inv_s;
+            let gy = -alpha * iy * inv_s;
+            let j = [gx * a, gy * a, gx, gy, iv, 1.0];
+            for k in 0..6 {
+                let wj = wgt * j[k];
+                gr[k] += wj * r;
+                for l in k..6 {
+                    hr[k][l] += wj * j[l];
+                }
+            }
+        }
+        for k in 0..6 {
+            g[k] += gr[k] as f64;
+            gr[k] = 0.0;
+            for l in k..6 {
+                hm[k][l] += hr[k][l] as f64;
+                hr[k][l] = 0.0;
+            }
+        }
+        cost += cost_r as f64;
+        sse += sse_r as f64;
+        (cost_r, sse_r) = (0.0, 0.0);
+    }
+    for k in 0..6 {
+        for l in 0..k {
+            hm[k][l] = hm[l][k];
+        }
+    }
+    Pass {
+        corr,
+        hm,
+        g,
+        cost,
+        sse,
+    }
+}
+
+/// Solves `H δ = −g` on the parameters `idx` (Cholesky with a tiny ridge); `None` if singular.
+// Small dense linear algebra reads best with indices.
+#[allow(clippy::needless_range_loop)]
+fn solve(hm: &[[f64; 6]; 6], g: &[f64; 6], idx: &[usize]) -> Option<[f64; 6]> {
+    let n = idx.len();
+    let mut a = [[0.0f64; 6]; 6];
+    let mut b = [0.0f64; 6];
+    for (r, &i) in idx.iter().enumerate() {
+        for (c, &j) in idx.iter().enumerate() {
+            a[r][c] = hm[i][j];
+        }
+        a[r][r] *= 1.0 + 1e-6;
+        b[r] = -g[i];
+    }
+    // Cholesky.
+    let mut l = [[0.0f64; 6]; 6];
+    for i in 0..n {
+        for j in 0..=i {
+            let mut s = a[i][j];
+            for k in 0..j {
+                s -= l[i][k] * l[j][k];
+            }
+            if i == j {
+                if s <= 1e-12 * a[i][i].abs().max(1e-30) {
+                    return None;
+                }
+                l[i][i] = s.sqrt();
+            } else {
+                l[i][j] = s / l[j][j];
+            }
+        }
+    }
+    let mut z = [0.0f64; 6];
+    for i in 0..n {
+        let mut s = b[i];
+        for k in 0..i {
+            s -= l[i][k] * z[k];
+        }
+        z[i] = s / l[i][i];
+    }
+    let mut x = [0.0f64; 6];
+    for i in (0..n).rev() {
+        let mut s = z[i];
+        for k in i + 1..n {
+            s -= l[k][i] * x[k];
+        }
+        x[i] = s / l[i][i];
+    }
+    let mut delta = [0.0f64; 6];
+    for (r, &i) in idx.iter().enumerate() {
+        delta[i] = x[r];
+    }
+    Some(delta)
+}
+
+/// Largest change of the flow a parameter step makes over the level's inverse-depth range,
+/// level px.
+fn flow_change(level: &Level, delta: &[f64; 6], a_range: (f64, f64)) -> f64 {
+    [a_range.0, a_range.1]
+        .iter()
+        .map(|&a| {
+            let du = delta[0] * a + delta[2];
+            let dv = delta[1] * a + delta[3];
+            du.hypot(dv) / level.scale as f64
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Gauss–Newton (IRLS with the Cauchy loss when `robust_k > 0`, its scale `robust_k` times
+/// the RMS residual at the start) from `start` at `level`, α and β refitted first; each step is
+/// halved until the cost does not grow. Returns the parameters and their correlation.
+// Small dense linear algebra reads best with indices.
+#[allow(clippy::needless_range_loop)]
+fn gauss_newton(
+    level: &Level,
+    start: Theta,
+    fit_t: bool,
+    iterations: usize,
+    robust_k: f32,
+) -> (Theta, f64) {
+    // The inverse-depth range the flow is checked over: 2nd to 98th percentile (a few flying
+    // pixels near the camera must not throttle every step).
+    let mut inv: Vec<f32> = level
+        .inv_depth
+        .iter()
+        .copied()
+        .filter(|&a| a > 0.0)
+        .collect();
+    if inv.is_empty() {
+        return (start, f64::NEG_INFINITY);
+    }
+    let lo = inv.len() / 50;
+    let hi = (inv.len() * 49 / 50).min(inv.len() - 1);
+    let a_min = *inv.select_nth_unstable_by(lo, f32::total_cmp).1 as f64;
+    let a_max = *inv.select_nth_unstable_by(hi, f32::total_cmp).1 as f64;
+    let idx: &[usize] = if fit_t {
+        &[0, 1, 2, 3, 4, 5]
+    } else {
+        &[2, 3, 4, 5]
+    };
+    let mut theta = start;
+    // Photometric gain/offset of the start point.
+    let p0 = normal_equations(level, &theta, 0.0);
+    let (alpha, beta) = p0.corr.gain_offset();
+    theta.p[4] = alpha;
+    theta.p[5] = beta;
+    let k = if robust_k > 0.0 {
+        let p = normal_equations(level, &theta, 0.0);
+        robust_k * (p.sse / p.corr.n.max(1.0)).sqrt() as f32
+    } else {
+        0.0
+    };
+    let mut pass = normal_equations(level, &theta, k);
+    let Some(mut corr) = pass.corr.value() else {
+        return (theta, f64::NEG_INFINITY);
+    };
+    // Pixels leave the image as the flow changes: compare mean costs.
+    let mean_cost = |p: &Pass| p.cost / p.corr.n.max(1.0);
+    for _ in 0..iterations {
+        let Some(mut delta) = solve(&pass.hm, &pass.g, idx) else {
+            break;
+        };
+        // At most 2 level px of flow change per step (the basin's width).
+        let mut change = flow_change(level, &delta, (a_min, a_max));
+        if change > 2.0 {
+            let s = 2.0 / change;
+            delta.iter_mut().for_each(|d| *d *= s);
+            change = 2.0;
+        }
+        let mut accepted = false;
+        for _ in 0..4 {
+            let mut cand = theta;
+            for i in 0..6 {
+                cand.p[i] += delta[i];
+            }
+            let next = normal_equations(level, &cand, k);
+            if let Some(c) = next.corr.value() {
+                if mean_cost(&next) <= mean_cost(&pass) {
+                    (theta, corr, pass) = (cand, c, next);
+                    accepted = true;
+                    break;
+                }
+            }
+            delta.iter_mut().for_each(|d| *d *= 0.5);
+            change *= 0.5;
+        }
+        if !accepted || change < 0.01 {
+            break;
+        }
+    }
+    (theta, corr)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::crossmodal::tests::textured_scene;
+
+    fn max_flow_error(c: Calibration, truth: Calibration, depths: &[f32]) -> f32 {
+        depths
+            .iter()
+            .map(|&z| {
+                let (a, b) = (c.flow_at(z).unwrap(), truth.flow_at(z).unwrap());
+                (a.0 - b.0).hypot(a.1 - b.1)
+            })
+            .fold(0.0, f32::max)
+    }
+
+    /// The landing rule matches the splatting convention: a ToF pixel at depth z lands at
+    /// `q − W(z)` in the view `synthesize_view` makes.
+    #[test]
+    fn direct_landing_matches_the_splatting_convention() {
+        let truth = Calibration {
+            tx: 6.0,
+            ty: -2.0,
+            cx: 3.0,
+            cy: 1.5,
+        };
+        let (h, w) = (40, 60);
+        // One bright ToF pixel at (20, 30), depth 1.5 m, on a 3 m wall.
+        let depth =
+            Array2::from_shape_fn((h, w), |(y, x)| if (y, x) == (20, 30) { 1.5 } else { 3.0 });
+        let rgb =
+            ndarray::Array3::from_shape_fn(
+                (h, w, 1),
+                |(y, x, _)| {
+                    if (y, x) == (20, 30) {
+                        255u8
+                    } else {
+                        0
+                    }
+                },
+            );
+        let view = crate::geometry::synthesize_view(rgb.view(), depth.view(), &truth);
+        // W(1.5) = (4 + 3, −4/3 + 1.5) = (7, 1/6): lands at (30 − 7, 20 − 1/6).
+        let level = Level {
+            scale: 1.0,
+            tof_w: w,
+            tof_h: h,
+            t: vec![0.0; w * h],
+            inv_depth: vec![0.0; w * h],
+            rgb_w: w,
+            rgb_h: h,
+            rgb: vec![[0.0; 3]; w * h],
+        };
+        let (px, py) = landing(&level, &Theta::from(truth), 30, 20, 1.0 / 1.5);
+        assert!((px - 23.0).abs() < 1e-5 && (py - (20.0 - 1.0 / 6.0)).abs() < 1e-5);
+        // The splatted view's brightest pixel is the nearest to the landing point.
+        let (mut best, mut at) = (0u8, (0, 0));
+        for ((y, x, _), &v) in view.rgb.indexed_iter() {
+            if v > best {
+                best = v;
+                at = (y, x);
+            }
+        }
+        assert_eq!(at, (20, 23));
+    }
+
+    /// A synthetic scene (discs at several depths before a wall, RGB and amplitude sharing the
+    /// boundaries but not the interior pattern) seen through a known calibration, with the
+    /// disocclusions filled as a real camera sees them: the direct fit, with the real-camera
+    /// settings (contours move with the nearer surface, depth edges added), recovers the flow
+    /// to within a pixel at every depth that has edges in both modalities (the discs; the wall
+    /// behind has only RGB stripes).
+    #[test]
+    fn direct_recovers_a_known_calibration_on_a_textured_scene() {
+        let truth = Calibration {
+            tx: 6.0,
+            ty: -2.0,
+            cx: 3.0,
+            cy: 1.5,
+        };
+        let (rgb, amplitude, depth) = textured_scene(&truth);
+        let params = DirectFitParams {
+            contour_radius: 5,
+            depth_edge_weight: 1.0,
+            ..DirectFitParams::default()
+        };
+        let fit = estimate_calibration_direct(
+            rgb.view(),
+            amplitude.view(),
+            depth.view(),
+            Calibration::IDENTITY,
+            &params,
+        );
+        assert!(!fit.fell_back, "{fit:?}");
+        assert!(fit.baseline_fitted, "{fit:?}");
+        let err = max_flow_error(fit.calibration, truth, &[0.8, 1.0, 1.2, 1.5, 1.8]);
+        assert!(err < 1.0, "flow error {err} px: {fit:?}");
+        // Far from the factory calibration's error.
+        let before = max_flow_error(Calibration::IDENTITY, truth, &[0.8, 1.0, 1.2, 1.5, 1.8]);
+        assert!(before > 6.0, "{before}");
+    }
+
+    /// Already aligned input: the fit stays at the identity (the project's aligned target is
+    /// AEPE ≤ 0.3 px).
+    #[test]
+    fn direct_keeps_aligned_input_aligned() {
+        let (rgb, amplitude, depth) = textured_scene(&Calibration::IDENTITY);
+        let fit = estimate_calibration_direct(
+            rgb.view(),
+            amplitude.view(),
+            depth.view(),
+            Calibration::IDENTITY,
+            &DirectFitParams::default(),
+        );
+        let err = max_flow_error(
+            fit.calibration,
+            Calibration::IDENTITY,
+            &[0.8, 1.2, 1.8, 3.0],
+        );
+        assert!(err < 0.3, "flow error {err} px: {fit:?}");
+    }
+
+    /// Nothing to fit on a flat image: the initial calibration comes back, flagged.
+    #[test]
+    fn direct_falls_back_on_a_flat_image() {
+        let initial = Calibration {
+            tx: 1.0,
+            ty: 0.5,
+            cx: -2.0,
+            cy: 0.25,
+        };
+        let rgb = ndarray::Array3::from_elem((100, 120, 3), 128u8);
+        let amp = Array2::from_elem((100, 120), 500.0f32);
+        let depth = Array2::from_shape_fn((100, 120), |(_, x)| 1.0 + 0.01 * x as f32);
+        let fit = estimate_calibration_direct(
+            rgb.view(),
+            amp.view(),
+            depth.view(),
+            initial,
+            &DirectFitParams::default(),
+        );
+        assert!(fit.fell_back, "{fit:?}");
+        assert_eq!(fit.calibration, initial);
+    }
+}
