@@ -22,7 +22,7 @@ pub struct Cli {
     pub command: Command,
 }
 
-/// Subcommands. `record` is planned (see DESIGN.md) and will be added here.
+/// Subcommands. `record` is planned (docs/design.md, "Departures from the original plan").
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// List the DEAR frame services on this machine, with their publishers and subscribers.

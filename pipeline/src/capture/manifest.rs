@@ -1,4 +1,5 @@
-//! `capture.json`: the manifest of a capture directory (see DESIGN.md, "Capture directory format").
+//! `capture.json`: the manifest of a capture directory (docs/design.md, "Capture directory
+//! format").
 
 use serde::{Deserialize, Serialize};
 

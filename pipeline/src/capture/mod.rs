@@ -1,4 +1,4 @@
-//! The capture-directory format of DESIGN.md: one format for simulator output, recordings and
+//! The capture-directory format (docs/design.md): one format for simulator output, recordings and
 //! replay. [`manifest`] is `capture.json`; [`reader`] opens and validates a directory;
 //! [`writer`] creates one; [`png`] and [`flo`] are the per-file codecs; [`layout`] names the
 //! files. Every error names the file it is about ([`CaptureError::path`]).
