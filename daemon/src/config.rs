@@ -7,6 +7,19 @@ use std::path::{Path, PathBuf};
 use dear_pipeline::Calibration;
 use serde::{Deserialize, Serialize};
 
+/// Largest `[capture] queue_depth`: a few frames absorb jitter; a longer queue only adds memory
+/// and latency (each waiting frame is a full RGB-D frame).
+pub const MAX_QUEUE_DEPTH: usize = 64;
+/// Longest `[runtime] stats_interval_s`: a day.
+pub const MAX_STATS_INTERVAL_S: f64 = 86_400.0;
+/// Largest `|t_x|`, `|t_y|` of `[pipeline] static_calibration`, px·m: a 10 cm baseline at a
+/// 10,000 px focal length. At start-up the bound tightens to the image size (see
+/// [`check_calibration_fits`]).
+pub const MAX_CALIBRATION_T: f32 = 1000.0;
+/// Largest `|c_x|`, `|c_y|` of `[pipeline] static_calibration`, px: the largest image side a
+/// capture may have. At start-up the bound tightens to the image size.
+pub const MAX_CALIBRATION_C: f32 = 8192.0;
+
 /// The whole configuration.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -72,7 +85,8 @@ pub struct CaptureConfig {
     pub start: usize,
     /// One past the last frame (position); none = to the end.
     pub end: Option<usize>,
-    /// Frames waiting between capture and processing before the oldest is dropped.
+    /// Frames waiting between capture and processing before the oldest is dropped
+    /// (1..=[`MAX_QUEUE_DEPTH`]).
     pub queue_depth: usize,
 }
 
@@ -109,7 +123,9 @@ pub struct PipelineConfig {
     /// the principal point applied between network runs (0 turns tracking off; 0.7 default).
     pub online_track_gain: f32,
     /// Static calibration for `classical`/`none`, and the DEAR engine's fallback before its
-    /// first estimate; none = the capture's `initial_calibration`.
+    /// first estimate; none = the capture's `initial_calibration`. Finite, `|t| ≤`
+    /// [`MAX_CALIBRATION_T`] px·m and `|c| ≤` [`MAX_CALIBRATION_C`] px here; at start-up
+    /// within the image size ([`check_calibration_fits`]).
     pub static_calibration: Option<Calibration>,
 }
 
@@ -150,7 +166,7 @@ pub enum CalibrationMode {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RuntimeConfig {
-    /// Seconds between statistics lines in the log.
+    /// Seconds between statistics lines in the log (0 < s ≤ [`MAX_STATS_INTERVAL_S`]).
     pub stats_interval_s: f64,
     /// Exit when a non-looping replay ends (otherwise keep the service up until signalled).
     pub exit_when_done: bool,
@@ -182,18 +198,20 @@ impl Config {
         Ok(config)
     }
 
-    /// Checks values serde cannot.
+    /// Checks values serde cannot. Errors name the key and the allowed values.
     pub fn validate(&self) -> Result<(), String> {
-        dear_proto::validate_service_name(&self.service.service_name())
-            .map_err(|e| format!("[service]: {e}"))?;
+        self.validate_service()?;
         if self.capture.source != "replay" {
             return Err(format!(
                 "[capture] source = {:?}: supported sources: \"replay\"",
                 self.capture.source
             ));
         }
-        if self.capture.queue_depth == 0 {
-            return Err("[capture] queue_depth must be at least 1".into());
+        let depth = self.capture.queue_depth;
+        if !(1..=MAX_QUEUE_DEPTH).contains(&depth) {
+            return Err(format!(
+                "[capture] queue_depth = {depth} must be within 1..={MAX_QUEUE_DEPTH}"
+            ));
         }
         if let Some(end) = self.capture.end {
             if end <= self.capture.start {
@@ -212,12 +230,102 @@ impl Config {
                 "[pipeline] online_track_gain = {gain} must be within 0..=1 (0 turns tracking off)"
             ));
         }
-        if !(self.runtime.stats_interval_s > 0.0 && self.runtime.stats_interval_s.is_finite()) {
+        if let Some(calibration) = &self.pipeline.static_calibration {
+            check_calibration(
+                "[pipeline] static_calibration",
+                calibration,
+                (MAX_CALIBRATION_T, MAX_CALIBRATION_T),
+                (MAX_CALIBRATION_C, MAX_CALIBRATION_C),
+                "",
+            )?;
+        }
+        let stats = self.runtime.stats_interval_s;
+        // Written so that NaN fails too.
+        if !(stats > 0.0 && stats <= MAX_STATS_INTERVAL_S) {
             return Err(format!(
-                "[runtime] stats_interval_s = {} must be positive",
-                self.runtime.stats_interval_s
+                "[runtime] stats_interval_s = {stats} must be within 0 < s <= {MAX_STATS_INTERVAL_S} seconds"
             ));
         }
         Ok(())
     }
+
+    /// The camera name is one segment of `dear/<camera>/frames`; an explicit name has no empty
+    /// segment; either way the result is a valid service name.
+    fn validate_service(&self) -> Result<(), String> {
+        let camera = &self.service.camera;
+        if camera.is_empty() {
+            return Err(format!("[service] camera = \"\" is empty; {SEGMENT_RULE}"));
+        }
+        if let Some(c) = camera
+            .chars()
+            .find(|c| !(c.is_ascii_alphanumeric() || "_-.".contains(*c)))
+        {
+            return Err(format!(
+                "[service] camera = {camera:?} contains {c:?}; {SEGMENT_RULE}"
+            ));
+        }
+        let key = match &self.service.name {
+            Some(name) => {
+                if name.split('/').any(str::is_empty) {
+                    return Err(format!(
+                        "[service] name = {name:?} has an empty segment (a leading, trailing or doubled '/')"
+                    ));
+                }
+                "name"
+            }
+            None => "camera",
+        };
+        dear_proto::validate_service_name(&self.service.service_name())
+            .map_err(|e| format!("[service] {key}: {e}"))
+    }
+}
+
+/// What a camera name may be.
+const SEGMENT_RULE: &str =
+    "it must be one segment of the service name: letters, digits and _ - . only";
+
+/// Checks that `calibration` can align a `width`×`height` stream: finite, `|t_x| ≤ width` and
+/// `|t_y| ≤ height` px·m (a flow of at most the image size at 1 m), `|c_x| ≤ width` and
+/// `|c_y| ≤ height` px. Beyond that no pixel of the depth lands in the image and every frame
+/// would be published without valid depth. `what` names the calibration in the error (e.g.
+/// `"[pipeline] static_calibration"`).
+pub fn check_calibration_fits(
+    what: &str,
+    calibration: &Calibration,
+    width: u32,
+    height: u32,
+) -> Result<(), String> {
+    let (w, h) = (width as f32, height as f32);
+    check_calibration(
+        what,
+        calibration,
+        (w, h),
+        (w, h),
+        &format!(" for the {width}x{height} image"),
+    )
+}
+
+/// `calibration` finite with `|t_x| ≤ t.0`, `|t_y| ≤ t.1`, `|c_x| ≤ c.0`, `|c_y| ≤ c.1`; the
+/// error names `what.<field>`, its value and the bound (`context` is appended to it).
+fn check_calibration(
+    what: &str,
+    calibration: &Calibration,
+    t: (f32, f32),
+    c: (f32, f32),
+    context: &str,
+) -> Result<(), String> {
+    let fields = [
+        ("tx", calibration.tx, t.0, "px·m"),
+        ("ty", calibration.ty, t.1, "px·m"),
+        ("cx", calibration.cx, c.0, "px"),
+        ("cy", calibration.cy, c.1, "px"),
+    ];
+    for (field, value, bound, unit) in fields {
+        if !value.is_finite() || value.abs() > bound {
+            return Err(format!(
+                "{what}.{field} = {value} must be finite and within ±{bound} {unit}{context}"
+            ));
+        }
+    }
+    Ok(())
 }

@@ -176,8 +176,12 @@ fn main() -> ExitCode {
     match deard::run::run(&config, shutdown) {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
-            tracing::error!("{e}");
-            eprintln!("deard: {e}");
+            // Once: in the log when errors are logged (both go to stderr), else on stderr.
+            if tracing::enabled!(tracing::Level::ERROR) {
+                tracing::error!("{e}");
+            } else {
+                eprintln!("deard: {e}");
+            }
             ExitCode::FAILURE
         }
     }

@@ -10,7 +10,7 @@ use dear_proto::{FrameHeader, Stage};
 
 use crate::capture::replay::ReplaySource;
 use crate::capture::{FrameSource, SourceItem};
-use crate::config::{Config, Pacing};
+use crate::config::{check_calibration_fits, Config, Pacing};
 use crate::processing::Processor;
 use crate::publish::FramePublisher;
 use crate::queue::{FrameQueue, Overflow};
@@ -20,14 +20,31 @@ use crate::stats::Stats;
 const DEAD_PEER_CLEANUP: Duration = Duration::from_secs(1);
 
 /// Runs the daemon until the source ends (with `exit_when_done`) or `shutdown` is raised.
-/// Returns the final statistics.
+/// Returns the final statistics, or an error if it cannot start or the source fails (e.g. no
+/// frame of a replay can be read).
 pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> {
     let source = ReplaySource::open(&config.capture)?;
     let (width, height) = source.size();
-    let calibration = config
-        .pipeline
-        .static_calibration
-        .unwrap_or_else(|| source.initial_calibration());
+    let calibration = match config.pipeline.static_calibration {
+        Some(calibration) => {
+            check_calibration_fits("[pipeline] static_calibration", &calibration, width, height)?;
+            calibration
+        }
+        None => {
+            let calibration = source.initial_calibration();
+            check_calibration_fits(
+                &format!(
+                    "{}: initial_calibration",
+                    config.capture.path.join("capture.json").display()
+                ),
+                &calibration,
+                width,
+                height,
+            )
+            .map_err(|e| format!("{e} (set [pipeline] static_calibration to override it)"))?;
+            calibration
+        }
+    };
     let service = config.service.service_name();
     tracing::info!(source = %source.describe(), %service, width, height, ?calibration, bundle = ?config.pipeline.bundle, refine = ?config.pipeline.refine, "starting");
 
@@ -45,6 +62,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
     let mut stats = Stats::new(Duration::from_secs_f64(config.runtime.stats_interval_s));
     let mut last_cleanup = Instant::now();
     let mut source_ended = false;
+    let mut failure = None;
     while !shutdown.load(Ordering::Relaxed) {
         match queue.pop(Duration::from_millis(100)) {
             Some(SourceItem::Frame {
@@ -70,6 +88,10 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
             Some(SourceItem::Skipped { frame_id, reason }) => {
                 stats.skipped += 1;
                 tracing::warn!(frame = frame_id, %reason, skipped_total = stats.skipped, "frame skipped");
+            }
+            Some(SourceItem::Failed { reason }) => {
+                failure = Some(reason);
+                break;
             }
             Some(SourceItem::End) => {
                 source_ended = true;
@@ -116,11 +138,15 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
         uptime_s = stats.uptime_s(),
         "stopped"
     );
-    Ok(stats)
+    match failure {
+        Some(reason) => Err(reason),
+        None => Ok(stats),
+    }
 }
 
-/// The capture thread: pulls items from the source into the queue until the source ends, the
-/// queue closes or shutdown is requested.
+/// The capture thread: pulls items from the source into the queue until the source ends or
+/// fails, the queue closes or shutdown is requested. The source's waits give way to `shutdown`
+/// and the queue's to [`FrameQueue::close`], so the thread can always be joined promptly.
 fn spawn_capture(
     mut source: Box<dyn FrameSource>,
     queue: Arc<FrameQueue<SourceItem>>,
@@ -130,9 +156,13 @@ fn spawn_capture(
         .name("capture".into())
         .spawn(move || {
             while !shutdown.load(Ordering::Relaxed) {
-                let item = source.next_item();
-                let end = matches!(item, SourceItem::End);
-                // Only good frames may be dropped; skip reports and the end marker always arrive.
+                let item = source.next_item(&shutdown);
+                if shutdown.load(Ordering::Relaxed) {
+                    break;
+                }
+                let end = matches!(item, SourceItem::End | SourceItem::Failed { .. });
+                // Only good frames may be dropped; skip reports, failures and the end marker
+                // always arrive.
                 if !queue.push(item, |i| matches!(i, SourceItem::Frame { .. })) || end {
                     break;
                 }

@@ -100,3 +100,18 @@ fn a_missing_capture_is_a_clear_startup_error() {
         "{err}"
     );
 }
+
+#[test]
+fn a_startup_error_is_printed_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let missing = tmp.path().join("nope");
+    let out = deard(&[
+        "--replay",
+        missing.to_str().unwrap(),
+        "--service",
+        "dear-test/cli/missing-once",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.matches("nope/capture.json").count(), 1, "{err}");
+}

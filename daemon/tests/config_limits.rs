@@ -1,0 +1,161 @@
+//! Configuration values that parse but cannot work are rejected at start-up, by key, with the
+//! allowed range: not accepted and left to panic, spin or publish garbage later.
+
+use std::process::Command;
+
+use deard::config::Config;
+
+/// The validation error for `toml`, panicking if it is accepted.
+fn rejected(toml: &str) -> String {
+    match Config::from_toml(toml) {
+        Ok(config) => panic!("accepted {toml:?} as {config:?}"),
+        Err(e) => e,
+    }
+}
+
+fn accepted(toml: &str) -> Config {
+    Config::from_toml(toml).unwrap_or_else(|e| panic!("rejected {toml:?}: {e}"))
+}
+
+#[test]
+fn queue_depth_is_bounded() {
+    for depth in ["0", "65", "100000", "9223372036854775807"] {
+        let err = rejected(&format!("[capture]\nqueue_depth = {depth}\n"));
+        assert!(
+            err.contains(&format!("queue_depth = {depth}")) && err.contains("1..=64"),
+            "{err}"
+        );
+    }
+    for depth in [1, 2, 64] {
+        let config = accepted(&format!("[capture]\nqueue_depth = {depth}\n"));
+        assert_eq!(config.capture.queue_depth, depth);
+    }
+}
+
+#[test]
+fn stats_interval_must_be_finite_positive_and_at_most_a_day() {
+    for s in ["1e20", "86401.0", "inf", "nan", "0.0", "-1.0"] {
+        let err = rejected(&format!("[runtime]\nstats_interval_s = {s}\n"));
+        assert!(
+            err.contains("stats_interval_s") && err.contains("86400"),
+            "{s}: {err}"
+        );
+    }
+    for s in [0.001, 5.0, 86400.0] {
+        let config = accepted(&format!("[runtime]\nstats_interval_s = {s:?}\n"));
+        assert_eq!(config.runtime.stats_interval_s, s);
+    }
+}
+
+#[test]
+fn static_calibration_must_be_finite_and_physical() {
+    for (field, value) in [
+        ("tx", "nan"),
+        ("ty", "inf"),
+        ("cx", "-inf"),
+        ("tx", "1e30"),
+        ("ty", "-5000.0"),
+        ("cx", "1e30"),
+        ("cy", "9000.0"),
+    ] {
+        let mut values = [("tx", "1.0"), ("ty", "0.5"), ("cx", "2.0"), ("cy", "-1.0")];
+        for v in values.iter_mut() {
+            if v.0 == field {
+                v.1 = value;
+            }
+        }
+        let table: Vec<String> = values.iter().map(|(k, v)| format!("{k} = {v}")).collect();
+        let toml = format!(
+            "[pipeline]\nstatic_calibration = {{ {} }}\n",
+            table.join(", ")
+        );
+        let err = rejected(&toml);
+        assert!(
+            err.contains(&format!("static_calibration.{field}")),
+            "{toml}: {err}"
+        );
+    }
+    let config =
+        accepted("[pipeline]\nstatic_calibration = { tx = -1.2, ty = 1.4, cx = 1.1, cy = 0.7 }\n");
+    assert_eq!(config.pipeline.static_calibration.unwrap().tx, -1.2);
+}
+
+#[test]
+fn camera_must_be_one_service_name_segment() {
+    for camera in [
+        "",
+        "a/b",
+        "/",
+        "left cam",
+        "tab\tcam",
+        "bell\u{7}",
+        "caméra",
+    ] {
+        let toml = format!("[service]\ncamera = {camera:?}\n");
+        let err = rejected(&toml);
+        assert!(err.contains("camera"), "{toml}: {err}");
+    }
+    for camera in ["cam0", "left-1", "ir_2.a"] {
+        let config = accepted(&format!("[service]\ncamera = {camera:?}\n"));
+        assert_eq!(
+            config.service.service_name(),
+            format!("dear/{camera}/frames")
+        );
+    }
+}
+
+#[test]
+fn a_service_name_has_no_empty_segment() {
+    for name in ["dear//frames", "/dear/cam0/frames", "dear/cam0/frames/"] {
+        let err = rejected(&format!("[service]\nname = {name:?}\n"));
+        assert!(err.contains("name") && err.contains(name), "{err}");
+    }
+    accepted("[service]\nname = \"dear/cam0/frames\"\n");
+}
+
+#[test]
+fn the_binary_names_a_bad_key_once() {
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("deard.toml");
+    std::fs::write(&file, "[service]\ncamera = \"\"\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
+        .args(["--config", file.to_str().unwrap(), "--print-config"])
+        .output()
+        .expect("run deard");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.matches("camera").count(), 1, "{err}");
+}
+
+#[test]
+fn a_static_calibration_beyond_the_image_is_a_startup_error() {
+    // samples/demo is 320x240: a principal-point offset of 300 px vertically leaves no overlap.
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("deard.toml");
+    std::fs::write(
+        &file,
+        "[pipeline]\nrefine = \"none\"\nstatic_calibration = { tx = 0.0, ty = 0.0, cx = 0.0, cy = 300.0 }\n",
+    )
+    .unwrap();
+    let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
+    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
+        .args(["--config", file.to_str().unwrap(), "--replay", demo])
+        .args([
+            "--service",
+            &format!("dear-test/{}/calib-range/frames", std::process::id()),
+            "--exit-when-done",
+        ])
+        .output()
+        .expect("run deard");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("static_calibration.cy = 300") && err.contains("240"),
+        "{err}"
+    );
+    assert_eq!(
+        err.matches("static_calibration.cy").count(),
+        1,
+        "once: {err}"
+    );
+}

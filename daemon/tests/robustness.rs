@@ -1,0 +1,256 @@
+//! The real `deard` binary under hostile input: it stops promptly on SIGTERM whatever it is
+//! waiting for, and a replay with nothing readable in it is an error, not a spin or a silent
+//! success.
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+use dear_pipeline::capture::{CaptureDir, FramePaths};
+
+/// Generous bound for a liveness check (the daemon polls its shutdown flag every 100 ms).
+const STOP_WITHIN: Duration = Duration::from_secs(5);
+
+fn demo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../samples/demo")
+}
+
+/// A unique service name per test and process, so tests can run in parallel.
+fn unique_service(test: &str) -> String {
+    format!("dear-test/{}/{test}/frames", std::process::id())
+}
+
+/// Writes a capture directory at `root` with one entry per `(timestamp_ns, readable)`: readable
+/// frames are copies of `samples/demo`'s first frame, unreadable ones have a truncated depth
+/// PNG (and their other files), so reading them fails.
+fn write_capture(root: &Path, frames: &[(u64, bool)]) -> PathBuf {
+    let demo = CaptureDir::open(demo()).expect("samples/demo opens");
+    let source = demo.frame_paths(0);
+    let mut manifest = demo.manifest().clone();
+    let template = manifest.frames[0].clone();
+    manifest.frames.clear();
+    std::fs::create_dir_all(root.join("frames")).unwrap();
+    for (id, &(timestamp_ns, readable)) in frames.iter().enumerate() {
+        let paths = FramePaths::new(root, id as u64);
+        for (from, to) in [
+            (&source.rgb, &paths.rgb),
+            (&source.amplitude, &paths.amplitude),
+            (&source.depth, &paths.depth),
+        ] {
+            std::fs::copy(from, to).unwrap();
+        }
+        if !readable {
+            std::fs::write(&paths.depth, b"\x89PNG truncated").unwrap();
+        }
+        let mut entry = template.clone();
+        entry.id = id as u64;
+        entry.timestamp_ns = timestamp_ns;
+        manifest.frames.push(entry);
+    }
+    std::fs::write(
+        root.join("capture.json"),
+        serde_json::to_string_pretty(&manifest).unwrap(),
+    )
+    .unwrap();
+    root.to_path_buf()
+}
+
+/// A running `deard`, killed with SIGKILL on drop if a test left it running.
+struct Daemon {
+    child: Child,
+    log: PathBuf,
+}
+
+impl Daemon {
+    fn start(service: &str, capture: &Path, args: &[&str], log: &Path) -> Daemon {
+        let child = Command::new(env!("CARGO_BIN_EXE_deard"))
+            .args(["--service", service, "--refine", "none", "--replay"])
+            .arg(capture)
+            .args(args)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(File::create(log).unwrap())
+            .spawn()
+            .expect("spawn deard");
+        Daemon {
+            child,
+            log: log.to_path_buf(),
+        }
+    }
+
+    fn log_text(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// Waits until the log contains `needle` (panics after `timeout`).
+    fn wait_for_log(&mut self, needle: &str, timeout: Duration) {
+        let deadline = Instant::now() + timeout;
+        while !self.log_text().contains(needle) {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                panic!(
+                    "deard exited ({status}) before logging {needle:?}:\n{}",
+                    self.log_text()
+                );
+            }
+            assert!(
+                Instant::now() < deadline,
+                "deard did not log {needle:?} within {timeout:?}:\n{}",
+                self.log_text()
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    fn signal(&self, signal: &str) {
+        let status = Command::new("kill")
+            .args([signal, &self.child.id().to_string()])
+            .status()
+            .expect("run kill");
+        assert!(status.success(), "kill {signal} failed");
+    }
+
+    /// The exit status, waiting up to `timeout`.
+    fn wait(&mut self, timeout: Duration) -> Option<ExitStatus> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                return Some(status);
+            }
+            if Instant::now() >= deadline {
+                return None;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        if matches!(self.child.try_wait(), Ok(None)) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+#[test]
+fn sigterm_stops_a_replay_waiting_for_a_distant_timestamp() {
+    let tmp = tempfile::tempdir().unwrap();
+    // The second frame is due an hour after the first: the capture thread waits for it.
+    let capture = write_capture(
+        &tmp.path().join("cap"),
+        &[(0, true), (3_600_000_000_000, true)],
+    );
+    let mut daemon = Daemon::start(
+        &unique_service("sigterm-pacing"),
+        &capture,
+        &["--pacing", "timestamps"],
+        &tmp.path().join("deard.log"),
+    );
+    daemon.wait_for_log("serving", Duration::from_secs(60));
+    // Let the first frame through, so the capture thread is waiting for the second.
+    std::thread::sleep(Duration::from_millis(500));
+    let sent = Instant::now();
+    daemon.signal("-TERM");
+    let status = daemon.wait(STOP_WITHIN).unwrap_or_else(|| {
+        panic!(
+            "deard still running {STOP_WITHIN:?} after SIGTERM:\n{}",
+            daemon.log_text()
+        )
+    });
+    assert!(
+        status.success(),
+        "clean exit on SIGTERM: {status}\n{}",
+        daemon.log_text()
+    );
+    assert!(
+        daemon.log_text().contains("stopped"),
+        "{}",
+        daemon.log_text()
+    );
+    assert!(sent.elapsed() < STOP_WITHIN);
+}
+
+#[test]
+fn a_looping_replay_with_no_readable_frame_stops_with_an_error_instead_of_spinning() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = write_capture(&tmp.path().join("cap"), &[(0, false), (33_000_000, false)]);
+    let mut daemon = Daemon::start(
+        &unique_service("loop-all-bad"),
+        &capture,
+        &["--loop", "--pacing", "fast"],
+        &tmp.path().join("deard.log"),
+    );
+    let status = daemon.wait(Duration::from_secs(30)).unwrap_or_else(|| {
+        let log = daemon.log_text();
+        panic!(
+            "deard kept looping over unreadable frames ({} log lines):\n{}",
+            log.lines().count(),
+            log.lines().take(20).collect::<Vec<_>>().join("\n")
+        )
+    });
+    let log = daemon.log_text();
+    assert!(!status.success(), "an error exit: {status}\n{log}");
+    assert!(log.contains("no readable frame"), "{log}");
+    assert!(
+        log.lines().count() < 50,
+        "a few lines, not a flood: {} lines",
+        log.lines().count()
+    );
+}
+
+#[test]
+fn a_replay_with_no_readable_frame_exits_non_zero() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = write_capture(&tmp.path().join("cap"), &[(0, false), (33_000_000, false)]);
+    // With and without exit_when_done: a service with nothing to serve is a failure either way.
+    for (name, args) in [
+        (
+            "all-bad-exit",
+            &["--pacing", "fast", "--exit-when-done"][..],
+        ),
+        ("all-bad-stay", &["--pacing", "fast"][..]),
+    ] {
+        let log = tmp.path().join(format!("{name}.log"));
+        let mut daemon = Daemon::start(&unique_service(name), &capture, args, &log);
+        let status = daemon.wait(Duration::from_secs(30)).unwrap_or_else(|| {
+            panic!(
+                "{name}: deard kept running with nothing to serve:\n{}",
+                daemon.log_text()
+            )
+        });
+        let log = daemon.log_text();
+        assert!(!status.success(), "{name}: an error exit: {status}\n{log}");
+        assert!(log.contains("no readable frame"), "{name}: {log}");
+        assert!(
+            log.contains("000000.depth.png"),
+            "{name}: names the file: {log}"
+        );
+    }
+}
+
+#[test]
+fn a_looping_replay_with_some_readable_frames_keeps_serving() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = write_capture(
+        &tmp.path().join("cap"),
+        &[(0, false), (33_000_000, true), (66_000_000, false)],
+    );
+    let mut daemon = Daemon::start(
+        &unique_service("loop-some-bad"),
+        &capture,
+        &["--loop", "--pacing", "timestamps"],
+        &tmp.path().join("deard.log"),
+    );
+    daemon.wait_for_log("serving", Duration::from_secs(60));
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(
+        daemon.wait(Duration::ZERO).is_none(),
+        "still serving:\n{}",
+        daemon.log_text()
+    );
+    daemon.signal("-TERM");
+    let status = daemon.wait(STOP_WITHIN).expect("stops on SIGTERM");
+    assert!(status.success(), "{status}\n{}", daemon.log_text());
+}
