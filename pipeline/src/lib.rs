@@ -18,9 +18,9 @@ pub mod align;
 pub mod calibration;
 pub mod capture;
 pub mod crossmodal;
-pub mod direct;
 #[cfg(feature = "inference")]
 pub mod dear;
+pub mod direct;
 pub mod evaluate;
 pub mod filter;
 pub mod frame;

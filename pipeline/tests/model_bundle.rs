@@ -274,7 +274,7 @@ fn bad_sizes_and_shapes_are_errors_not_panics() {
     );
     let mut depth = Array2::zeros((24, 32));
     let err = runner
-        .refine(good.view(), good.view(), None, depth.view_mut())
+        .refine(good.view(), good.view(), None, None, depth.view_mut())
         .unwrap_err();
     assert!(err.to_string().contains("RGB"), "{err}");
 }
