@@ -125,6 +125,13 @@ fn bench(c: &mut Criterion) {
         );
         let mut flow_out = Flow::zeros(H, W);
         let mut depth_out = Array2::zeros((H, W));
+        // A hybrid refiner also takes the classical filter's output (computed once here: the
+        // refine_net row times the graph and its tail; the frame rows include the filter).
+        let classical = chain.runner_mut().refine_uses_classical().then(|| {
+            dear_pipeline::filter::ClassicalRefiner::default()
+                .refine(depth_w.view(), rgb.view())
+                .0
+        });
         group.bench_function(format!("flow_net{suffix}"), |b| {
             b.iter(|| {
                 chain
@@ -155,7 +162,7 @@ fn bench(c: &mut Criterion) {
                         amp_w.view(),
                         depth_w.view(),
                         Some([planes[0].view(), planes[1].view(), planes[2].view()]),
-                        None,
+                        classical.as_ref().map(|c| c.view()),
                         depth_out.view_mut(),
                     )
                     .unwrap();
@@ -196,6 +203,7 @@ fn bench_gated_tail(c: &mut Criterion) {
         max_bias: 0.05,
         range_scale: 100.0,
         max_depth_m: 10.0,
+        jump_scale: None,
     };
     let mut out = Array2::zeros((H, W));
     let mut group = c.benchmark_group("dear_chain_vga");

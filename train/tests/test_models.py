@@ -15,6 +15,7 @@ from dear_train.models import (
 )
 from dear_train.models.complexity import measure
 from dear_train.models.dear import DEAR
+from dear_train.models.kpn import uses_classical
 from dear_train.models.layers import Correlation, resize_like
 
 H, W = 48, 64
@@ -77,7 +78,8 @@ def test_refine_outputs(tier: str, variant: str) -> None:
     if tier == "paper" and variant not in ("kpn", "norgb", "unet", "deeptof"):
         pytest.skip("the other variants differ from kpn only in the kernel application")
     rgb, amp, depth = _inputs()
-    out = build_refine(tier, variant)(amp, depth / 10, rgb)
+    classical = depth / 10 if uses_classical(variant) else None
+    out = build_refine(tier, variant)(amp, depth / 10, rgb, classical)
     assert out.shape == (2, 1, H, W) and out.dtype == torch.float32
 
 
@@ -119,7 +121,9 @@ def test_gradients_reach_every_parameter(tier: str) -> None:
     _check_all_grads(fusion, sum((o * torch.randn_like(o)).sum() for o in fusion(f, f + 1)))
     for variant in VARIANTS:
         refine = build_refine(tier, variant)
-        out = refine(amp, depth / 10, rgb)
+        # The hybrid refiner also takes the classical filter's output (here a perturbed depth).
+        classical = depth / 10 + 0.01 * torch.randn_like(depth) if uses_classical(variant) else None
+        out = refine(amp, depth / 10, rgb, classical)
         _check_all_grads(refine, (out * torch.randn_like(out)).sum())
 
 
