@@ -60,9 +60,10 @@ if [ ! -f "$data/vga_sequence/capture.json" ]; then
         --out "$data/vga_sequence"
 fi
 
-bundles=()
+# The shipped bundle first (the figures show the first bundle), then the others for comparison.
+bundles=(--bundle models/edge)
 for b in models/*/; do
-    [ -f "$b/model.json" ] && bundles+=(--bundle "${b%/}")
+    [ "${b%/}" != models/edge ] && [ -f "$b/model.json" ] && bundles+=(--bundle "${b%/}")
 done
 for set in aligned sigma2 sigma4 sigma6 heldout heldout-sigma4; do
     figures=0
