@@ -291,15 +291,27 @@ pub(crate) fn gradient_magnitude(img: ArrayView2<f32>) -> Array2<f32> {
             g[[y, x]] = (gx * gx + gy * gy).sqrt();
         }
     }
-    let mut sample: Vec<f32> = g.iter().step_by(5).copied().filter(|v| *v > 0.0).collect();
+    normalise_by_p99(&mut g, 5);
+    g
+}
+
+/// Scales an edge map so that its 99th percentile (of the positive values, estimated on every
+/// `sample_stride`-th pixel) becomes 1, clipping above: edge maps of different modalities then
+/// share one scale. A map with no positive value is left as it is.
+pub(crate) fn normalise_by_p99(g: &mut Array2<f32>, sample_stride: usize) {
+    let mut sample: Vec<f32> = g
+        .iter()
+        .step_by(sample_stride)
+        .copied()
+        .filter(|v| *v > 0.0)
+        .collect();
     if sample.is_empty() {
-        return g;
+        return;
     }
     let k = (sample.len() * 99 / 100).min(sample.len() - 1);
     let (_, p99, _) = sample.select_nth_unstable_by(k, f32::total_cmp);
     let scale = p99.max(1e-6);
     g.mapv_inplace(|v| (v / scale).min(1.0));
-    g
 }
 
 #[cfg(test)]

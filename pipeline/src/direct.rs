@@ -58,7 +58,7 @@
 use ndarray::{Array2, ArrayView2, ArrayView3};
 
 use crate::calibration::Calibration;
-use crate::crossmodal::{gradient_magnitude, rgb_to_gray};
+use crate::crossmodal::{gradient_magnitude, normalise_by_p99, rgb_to_gray};
 use crate::geometry::surface::is_valid_depth;
 
 /// Settings of [`estimate_calibration_direct`].
@@ -370,14 +370,7 @@ fn depth_edges(depth: ArrayView2<f32>) -> Array2<f32> {
             g[[y, x]] = if m.is_finite() { m } else { 0.0 };
         }
     }
-    let mut sample: Vec<f32> = g.iter().step_by(3).copied().filter(|v| *v > 0.0).collect();
-    if sample.is_empty() {
-        return g;
-    }
-    let k = (sample.len() * 99 / 100).min(sample.len() - 1);
-    let (_, p99, _) = sample.select_nth_unstable_by(k, f32::total_cmp);
-    let scale = p99.max(1e-6);
-    g.mapv_inplace(|v| (v / scale).min(1.0));
+    normalise_by_p99(&mut g, 3);
     g
 }
 
