@@ -4,7 +4,13 @@
 //! - [`aepe`]: average end-point error of a flow over valid pixels (paper Table 1);
 //! - [`DepthErrorSplit`]: depth MAE within a maximum range, with pixels ranked by the *input*
 //!   depth error and split into quantile classes (paper Tables 2 and 3): low 0–25 %, mid
-//!   25–50 %, high 50–75 %, the rest "outliers"; `All` covers every evaluated pixel.
+//!   25–50 %, high 50–75 %, the rest "outliers"; `All` covers every evaluated pixel. Pixels are
+//!   ranked within each frame and the sums accumulated over frames, never re-ranked over a set.
+//!
+//! `train/dear_train/evaluation.py` implements the same definitions for the training side
+//! (`dear-evaluate`, a run's validation, `model.json`'s `validation`); both are checked against
+//! the hand-computed cases in `fixtures/metrics/` (`pipeline/tests/metrics_fixture.rs`,
+//! `train/tests/test_metrics_fixture.py`). Change the two together.
 
 use ndarray::{ArrayView2, Zip};
 

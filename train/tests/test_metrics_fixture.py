@@ -1,0 +1,163 @@
+"""The Python metrics against the hand-computed cases in ``fixtures/metrics/``.
+
+``pipeline/tests/metrics_fixture.rs`` checks ``pipeline/src/metrics.rs`` against the same files,
+so both languages compute one definition (per-frame ranking, see
+:mod:`dear_train.evaluation`). The depth case is built so that ranking pooled over the set,
+other quarter boundaries, other tie-breaking or counting invalid outputs all fail it
+(``fixtures/metrics/make_metrics.py``).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from dear_train.evaluation import (
+    CLASSES,
+    MAE_RANGE_M,
+    AepeAccumulator,
+    DepthAccumulator,
+    DepthErrorSplit,
+    aepe,
+    depth_error_classes,
+)
+
+FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "metrics"
+#: Every depth is a multiple of 1/64 m, so the float32 arithmetic is exact; this only absorbs
+#: the order of the float64 sums.
+TOL = 1e-9
+
+
+def arr(spec: dict) -> np.ndarray:
+    dtype = {"f32": np.float32, "bool": np.bool_}[spec["dtype"]]
+    return np.array(spec["data"], dtype=np.float64).astype(dtype).reshape(spec["shape"])
+
+
+def load(name: str) -> dict:
+    return json.loads((FIXTURE / f"{name}.json").read_text())
+
+
+def frames(doc: dict) -> list[dict[str, np.ndarray]]:
+    return [{k: arr(v) for k, v in f.items()} for f in doc["inputs"]["frames"]]
+
+
+def check_split(split: DepthErrorSplit, want: dict) -> None:
+    assert split.counts == want["counts"]
+    assert split.missing == want["missing"]
+    np.testing.assert_allclose(split.sums, want["sums_m"], rtol=0, atol=TOL)
+
+
+def test_depth_split_matches_the_fixture() -> None:
+    doc = load("depth_error_split")
+    assert doc["inputs"]["max_depth_m"] == MAE_RANGE_M
+    out = doc["outputs"]
+    total = DepthErrorSplit()
+    for f, want in zip(frames(doc), out["per_frame"], strict=True):
+        one = DepthErrorSplit()
+        one.add_frame(f["input"], f["output"], f["gt"], f["valid"], doc["inputs"]["max_depth_m"])
+        check_split(one, want)
+        total.merge(one)
+    check_split(total, out)
+    for k, c in enumerate(CLASSES):
+        assert total.mae_cm(k) == pytest.approx(out["mae_cm"][c], abs=TOL)
+    assert total.mae_all_cm() == pytest.approx(out["mae_all_cm"], abs=TOL)
+    assert total.coverage() == pytest.approx(out["coverage"], abs=1e-12)
+    res = total.result()
+    assert [res[c] for c in CLASSES] == pytest.approx([out["mae_cm"][c] for c in CLASSES])
+    assert res["all"] == pytest.approx(out["mae_all_cm"])
+
+
+def test_batched_accumulator_ranks_each_sample() -> None:
+    """``evaluate``'s path: the three frames in one batch give the per-frame figures."""
+    doc = load("depth_error_split")
+    fs = frames(doc)
+
+    def batch(key: str) -> torch.Tensor:
+        return torch.from_numpy(np.stack([f[key] for f in fs]))[:, None]
+
+    acc = DepthAccumulator()
+    acc.add(batch("output"), batch("input"), batch("gt"), batch("valid"))
+    assert acc.frames == 3
+    check_split(acc.split, doc["outputs"])
+    res = acc.result()
+    assert res["low"] == pytest.approx(doc["outputs"]["mae_cm"]["low"], abs=TOL)
+    assert res["coverage"] == pytest.approx(doc["outputs"]["coverage"])
+
+
+def test_pooled_ranking_would_fail_the_fixture() -> None:
+    """The fixture tells the definitions apart: the frames stacked as one (= pooled over the
+    set, the former Python protocol) rank differently."""
+    doc = load("depth_error_split")
+    fs = frames(doc)
+    pooled = DepthErrorSplit()
+    pooled.add_frame(
+        *(np.concatenate([f[k] for f in fs]) for k in ("input", "output", "gt", "valid"))
+    )
+    want = doc["outputs"]
+    assert pooled.mae_cm(0) == pytest.approx(want["pooled_ranking_low_mae_cm"], abs=TOL)
+    assert abs(pooled.mae_cm(0) - want["mae_cm"]["low"]) > 0.1
+    assert pooled.counts != want["counts"]
+
+
+def test_depth_error_classes_is_one_frame() -> None:
+    doc = load("depth_error_split")
+    f = frames(doc)[0]
+    want = doc["outputs"]["per_frame"][0]
+    g, i, o = f["gt"], f["input"], f["output"]
+    sel = f["valid"] & (g > 0) & (g <= MAE_RANGE_M) & (i > 0)
+    out_err = np.where(o[sel] > 0, np.abs(o[sel] - g[sel]), np.nan)
+    got = depth_error_classes(out_err, np.abs(i[sel] - g[sel]))
+    for k, c in enumerate(CLASSES):
+        assert got[c] == pytest.approx(100 * want["sums_m"][k] / want["counts"][k], abs=TOL)
+    assert got["coverage"] == pytest.approx(9 / 10)
+
+
+def test_empty_split() -> None:
+    res = DepthErrorSplit().result()
+    assert all(np.isnan(res[c]) for c in (*CLASSES, "all")) and res["coverage"] == 0.0
+
+
+def test_aepe_matches_the_fixture() -> None:
+    doc = load("aepe")
+    fs = frames(doc)
+    want = doc["outputs"]
+    acc = AepeAccumulator()
+    for f, w in zip(fs, want["per_frame"], strict=True):
+        est = np.stack([f["estimate_u"], f["estimate_v"]])
+        truth = np.stack([f["truth_u"], f["truth_v"]])
+        got = aepe(est, truth, f["valid"])
+        assert got == (None if w is None else pytest.approx(w, abs=1e-9))
+        acc.add(
+            torch.from_numpy(est)[None],
+            torch.from_numpy(truth)[None],
+            torch.from_numpy(f["valid"])[None, None],
+        )
+    assert acc.result() == pytest.approx(want["mean_over_frames"], abs=1e-9)
+    # One batch of all frames: still the mean over samples.
+    batched = AepeAccumulator()
+    batched.add(
+        torch.from_numpy(np.stack([np.stack([f["estimate_u"], f["estimate_v"]]) for f in fs])),
+        torch.from_numpy(np.stack([np.stack([f["truth_u"], f["truth_v"]]) for f in fs])),
+        torch.from_numpy(np.stack([f["valid"] for f in fs]))[:, None],
+    )
+    assert batched.result() == pytest.approx(want["mean_over_frames"], abs=1e-9)
+
+
+def _maker() -> types.ModuleType:
+    spec = importlib.util.spec_from_file_location("make_metrics", FIXTURE / "make_metrics.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_committed_fixture_is_what_the_generator_writes() -> None:
+    make = _maker()
+    assert load("depth_error_split") == json.loads(json.dumps(make.depth_doc()))
+    assert load("aepe") == json.loads(json.dumps(make.aepe_doc()))
