@@ -242,11 +242,11 @@ impl Processor {
                     }
                     None => {
                         set_calibration(header, report.calibration.unwrap_or(self.calibration));
-                        header.calib_quality = fit.map_or(0.0, |m| m.inlier_fraction);
+                        header.calib_quality = fit.map_or(0.0, |m| m.fit_quality());
                         header.calib_age_frames = 0;
                     }
                 }
-                header.calib_residual_px = fit.map_or(f32::NAN, |m| m.rms_residual_px);
+                header.calib_residual_px = fit.and_then(|m| m.residual_px()).unwrap_or(f32::NAN);
                 let t = &report.timings;
                 let us = |d: Duration| d.as_micros().min(u32::MAX as u128) as u32;
                 header.stage_latency_us[Stage::Preprocess as usize] = us(t.preprocess);

@@ -151,11 +151,15 @@ fn depth_split_matches_the_fixture() {
 fn pooled_ranking_would_fail_the_fixture() {
     let doc = load("depth_error_split");
     let frames = depth_frames(&doc);
-    let stack = |pick: fn(&(Array2<f32>, Array2<f32>, Array2<f32>)) -> &Array2<f32>| {
-        let views: Vec<_> = frames.iter().map(|f| pick(f).view()).collect();
+    // 0: input, 1: output, 2: ground truth.
+    let stack = |plane: usize| {
+        let views: Vec<_> = frames
+            .iter()
+            .map(|f| [&f.0, &f.1, &f.2][plane].view())
+            .collect();
         concatenate(Axis(0), &views).unwrap()
     };
-    let (input, output, gt) = (stack(|f| &f.0), stack(|f| &f.1), stack(|f| &f.2));
+    let (input, output, gt) = (stack(0), stack(1), stack(2));
     let mut pooled = DepthErrorSplit::default();
     pooled.add_frame(input.view(), output.view(), gt.view(), MAX_EVAL_DEPTH_M);
     let out = &doc["outputs"];

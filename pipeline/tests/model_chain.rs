@@ -12,6 +12,7 @@ use dear_pipeline::dear::{
 };
 use dear_pipeline::geometry::warp_depth;
 use dear_pipeline::model::ModelBundle;
+use dear_pipeline::online::Evidence;
 use dear_pipeline::{Calibration, Flow};
 use ndarray::{s, Array2, Array3, ArrayView2, Axis};
 
@@ -100,6 +101,14 @@ fn max_flow_diff(a: &Flow, b: &Flow) -> f32 {
     max_diff(a.u.view(), b.u.view(), |_, _| true).max(max_diff(a.v.view(), b.v.view(), |_, _| true))
 }
 
+/// The chain without the direct fit: the three networks and the least squares only.
+fn paper_chain() -> ChainOptions {
+    ChainOptions {
+        direct_fit: None,
+        ..ChainOptions::default()
+    }
+}
+
 struct Outputs {
     depth: Array2<f32>,
     confidence: Array2<u8>,
@@ -135,7 +144,8 @@ fn run(
 #[test]
 fn full_chain_matches_pytorch() {
     let p = Parity::load();
-    let mut chain = DearChain::new(&bundle(), p.w, p.h).unwrap();
+    // The paper's chain, as PyTorch runs it: no direct fit after the network's calibration.
+    let mut chain = DearChain::with_options(&bundle(), p.w, p.h, paper_chain()).unwrap();
     let (report, out) = run(&mut chain, &p, ChainMode::Full);
     assert!(report.ran_flow_network && report.ran_fusion_network);
 
@@ -330,7 +340,7 @@ fn cached_fusion_choice_on_ground_truth() {
     };
     let gt_depth = p.plane("gt_depth", 0);
     let gt_flow = p.flow("gt_flow");
-    let mut chain = DearChain::with_options(&bundle(), p.w, p.h, ChainOptions::default()).unwrap();
+    let mut chain = DearChain::with_options(&bundle(), p.w, p.h, paper_chain()).unwrap();
     let mut results = Vec::new();
     for (name, mode, fusion) in [
         ("full", ChainMode::Full, CachedFusion::Skip),
@@ -375,4 +385,48 @@ fn cached_fusion_choice_on_ground_truth() {
     // must align at least as well as a full run of the (untrained) networks.
     assert!(results[1].1 < 0.5, "cached-skip AEPE {}", results[1].1);
     assert!(results[1].1 <= results[0].1, "{results:?}");
+}
+
+/// `Full` mode by default refines the network's calibration by the direct fit to the frame's
+/// edges; when that fit is confident, the frame is aligned by its calibration exactly as a
+/// `Cached` frame is (no fusion, the splat's flow), and closer to the truth than the untrained
+/// networks' flow.
+#[test]
+fn full_mode_refines_the_network_calibration_by_the_direct_fit() {
+    let p = Parity::load();
+    let gt_flow = p.flow("gt_flow");
+    let gt_depth = p.plane("gt_depth", 0);
+    let aepe = |f: &Flow| {
+        let (mut sum, mut n) = (0.0f64, 0usize);
+        for ((y, x), &z) in gt_depth.indexed_iter() {
+            if z > 0.0 {
+                let d = (f.u[[y, x]] - gt_flow.u[[y, x]]).hypot(f.v[[y, x]] - gt_flow.v[[y, x]]);
+                sum += f64::from(d);
+                n += 1;
+            }
+        }
+        sum / n as f64
+    };
+    let mut paper = DearChain::with_options(&bundle(), p.w, p.h, paper_chain()).unwrap();
+    run(&mut paper, &p, ChainMode::Full);
+    let paper_aepe = aepe(paper.flow_refined());
+
+    let mut chain = DearChain::new(&bundle(), p.w, p.h).unwrap();
+    assert!(chain.options().direct_fit.is_some());
+    let (report, _) = run(&mut chain, &p, ChainMode::Full);
+    assert!(report.ran_flow_network && report.ran_direct_fit);
+    let m = report.measurement.unwrap().unwrap();
+    assert!(
+        matches!(m.evidence, Evidence::Edges { correlation, .. } if correlation > 0.2),
+        "the direct fit should be confident on the parity frame: {m:?}"
+    );
+    assert!(!report.ran_fusion_network);
+    assert_eq!(report.calibration, Some(m.calibration));
+    let mut aligner = StaticAligner::new(p.h, p.w);
+    let mut splat = Array2::zeros((p.h, p.w));
+    aligner.align_into(p.plane("tof_depth", 0), &m.calibration, splat.view_mut());
+    assert_eq!(chain.flow_refined(), aligner.flow());
+    let direct_aepe = aepe(chain.flow_refined());
+    println!("parity frame AEPE: paper chain {paper_aepe:.3} px, with the direct fit {direct_aepe:.3} px");
+    assert!(direct_aepe < paper_aepe, "{direct_aepe} vs {paper_aepe}");
 }

@@ -99,7 +99,8 @@ pub struct FrameHeader {
     pub calib_cx: f32,
     /// c_y, px.
     pub calib_cy: f32,
-    /// RMS residual (px) of the last calibration fit; NaN when not estimated (static).
+    /// RMS residual (px) of the last calibration fit to a flow; NaN when not estimated (static)
+    /// or when the last fit was to the frame's edges (it has no end-point residual).
     pub calib_residual_px: f32,
     /// Quality of the calibration estimate in [0, 1]; 0 = static / unknown.
     pub calib_quality: f32,

@@ -8,8 +8,9 @@
 //! and the frame's edge alignment check (if any; see [`crate::online::residual`]).
 //!
 //! Filtering, in order:
-//! 1. *Admission*: a fit that failed, used fewer than `min_pixels`, explains less than
-//!    `min_inlier_fraction` of the flow or has an inlier RMS above `max_rms_px` is rejected.
+//! 1. *Admission*: a flow fit that failed, used fewer than `min_pixels`, explains less than
+//!    `min_inlier_fraction` of the flow or has an inlier RMS above `max_rms_px` is rejected; so
+//!    is an edge fit whose edge correlation is below `min_edge_correlation`.
 //! 2. *Innovation gate*: once the estimate is established, an admitted measurement whose
 //!    predicted flow differs from the estimate's by more than `gate_px` anywhere in the depth
 //!    range is held back. If `jump_confirmations` consecutive held-back measurements agree
@@ -37,7 +38,7 @@ use std::collections::VecDeque;
 
 use crate::calibration::Calibration;
 use crate::geometry::LsqError;
-use crate::online::measurement::Measurement;
+use crate::online::measurement::{Evidence, Measurement};
 use crate::online::residual::EdgeAlignment;
 
 /// Settings of [`OnlineCalibrator`].
@@ -64,6 +65,8 @@ pub struct OnlineConfig {
     pub max_rms_px: f32,
     /// Minimum usable pixels of an admissible measurement.
     pub min_pixels: usize,
+    /// Minimum edge correlation of an admissible edge (direct) fit.
+    pub min_edge_correlation: f32,
     /// Relative growth of the alignment residual over its post-estimate value that triggers
     /// the network.
     pub residual_trigger_ratio: f32,
@@ -95,6 +98,7 @@ impl Default for OnlineConfig {
             min_inlier_fraction: 0.5,
             max_rms_px: 2.0,
             min_pixels: 500,
+            min_edge_correlation: 0.2,
             residual_trigger_ratio: 0.25,
             residual_trigger_margin: 0.02,
             residual_trigger_frames: 3,
@@ -154,6 +158,8 @@ pub enum Rejection {
     FewInliers(f32),
     /// Inlier RMS above `max_rms_px`.
     LargeResidual(f32),
+    /// Edge correlation below `min_edge_correlation`.
+    LowEdgeCorrelation(f32),
     /// Non-finite parameters.
     NotFinite,
 }
@@ -329,15 +335,28 @@ impl OnlineCalibrator {
         if ![c.tx, c.ty, c.cx, c.cy].iter().all(|v| v.is_finite()) {
             return Err(Rejection::NotFinite);
         }
-        if m.pixels_used < self.config.min_pixels {
-            return Err(Rejection::TooFewPixels(m.pixels_used));
-        }
-        // Written to reject NaN too.
-        if m.inlier_fraction.is_nan() || m.inlier_fraction < self.config.min_inlier_fraction {
-            return Err(Rejection::FewInliers(m.inlier_fraction));
-        }
-        if m.rms_residual_px.is_nan() || m.rms_residual_px > self.config.max_rms_px {
-            return Err(Rejection::LargeResidual(m.rms_residual_px));
+        // The comparisons are written to reject NaN too.
+        match m.evidence {
+            Evidence::Flow {
+                rms_residual_px,
+                inlier_fraction,
+                pixels_used,
+            } => {
+                if pixels_used < self.config.min_pixels {
+                    return Err(Rejection::TooFewPixels(pixels_used));
+                }
+                if inlier_fraction.is_nan() || inlier_fraction < self.config.min_inlier_fraction {
+                    return Err(Rejection::FewInliers(inlier_fraction));
+                }
+                if rms_residual_px.is_nan() || rms_residual_px > self.config.max_rms_px {
+                    return Err(Rejection::LargeResidual(rms_residual_px));
+                }
+            }
+            Evidence::Edges { correlation, .. } => {
+                if correlation.is_nan() || correlation < self.config.min_edge_correlation {
+                    return Err(Rejection::LowEdgeCorrelation(correlation));
+                }
+            }
         }
         Ok(())
     }
@@ -400,8 +419,8 @@ impl OnlineCalibrator {
 
     /// Quality of the estimate in `[0, 1]`:
     /// `fit · acceptance · freshness` where
-    /// - `fit` is the median over the window of `inlier_fraction / (1 + rms²)` (rms in px): 1 for
-    ///   a flow the model explains exactly, 0.5 at 1 px RMS;
+    /// - `fit` is the median over the window of [`Measurement::fit_quality`] (a flow fit's
+    ///   `inlier_fraction / (1 + rms²)`, an edge fit's edge correlation);
     /// - `acceptance` is the fraction of the last `window` network frames that were accepted
     ///   (rejected and held-back ones lower it);
     /// - `freshness` is 1 up to `2 · interval_frames` frames since the last accepted estimate and
@@ -412,11 +431,7 @@ impl OnlineCalibrator {
         if self.estimate.is_none() || self.accepted.is_empty() {
             return 0.0;
         }
-        let mut fits: Vec<f32> = self
-            .accepted
-            .iter()
-            .map(|m| m.inlier_fraction / (1.0 + m.rms_residual_px * m.rms_residual_px))
-            .collect();
+        let mut fits: Vec<f32> = self.accepted.iter().map(Measurement::fit_quality).collect();
         fits.sort_by(f32::total_cmp);
         let fit = fits[fits.len() / 2];
         let acceptance = if self.attempts.is_empty() {
@@ -472,13 +487,52 @@ mod tests {
         cy: 1.0,
     };
 
-    fn good(c: Calibration) -> Measurement {
+    fn flow_fit(c: Calibration, rms_residual_px: f32, inlier_fraction: f32) -> Measurement {
         Measurement {
             calibration: c,
-            rms_residual_px: 0.3,
-            inlier_fraction: 0.95,
-            pixels_used: 10_000,
+            evidence: Evidence::Flow {
+                rms_residual_px,
+                inlier_fraction,
+                pixels_used: 10_000,
+            },
         }
+    }
+
+    fn good(c: Calibration) -> Measurement {
+        flow_fit(c, 0.3, 0.95)
+    }
+
+    fn edge_fit(c: Calibration, correlation: f32) -> Measurement {
+        Measurement {
+            calibration: c,
+            evidence: Evidence::Edges {
+                correlation,
+                initial_correlation: 0.1,
+            },
+        }
+    }
+
+    #[test]
+    fn edge_fits_are_admitted_by_their_correlation_and_it_is_their_quality() {
+        let mut est = OnlineCalibrator::new(OnlineConfig::default());
+        for weak in [0.1, f32::NAN] {
+            est.begin_frame();
+            let outcome = est.end_frame(Some(Ok(edge_fit(TRUE, weak))), None);
+            assert!(
+                matches!(
+                    outcome,
+                    Some(Outcome::Rejected(Rejection::LowEdgeCorrelation(_)))
+                ),
+                "{outcome:?}"
+            );
+        }
+        assert_eq!(est.estimate(), None);
+        est.begin_frame();
+        let outcome = est.end_frame(Some(Ok(edge_fit(TRUE, 0.6))), None);
+        assert_eq!(outcome, Some(Outcome::Accepted));
+        assert_eq!(est.estimate(), Some(TRUE));
+        // fit 0.6 (the correlation) × acceptance 1/3 × freshness 1.
+        assert!((est.quality() - 0.2).abs() < 1e-6, "{}", est.quality());
     }
 
     /// Deterministic small noise in [-a, a].
@@ -695,10 +749,7 @@ mod tests {
         drive(
             &mut est,
             3,
-            |_| Measurement {
-                inlier_fraction: 0.2,
-                ..good(TRUE)
-            },
+            |_| flow_fit(TRUE, 0.3, 0.2),
             |_, _, o| {
                 assert!(
                     matches!(o, Some(Outcome::Rejected(Rejection::FewInliers(_)))),
@@ -714,11 +765,7 @@ mod tests {
         drive(
             &mut est2,
             5,
-            |f| Measurement {
-                rms_residual_px: 1.5,
-                inlier_fraction: 0.7,
-                ..good(noisy(TRUE, f))
-            },
+            |f| flow_fit(noisy(TRUE, f), 1.5, 0.7),
             |_, _, _| {},
         );
         assert!(est2.quality() < 0.3, "{}", est2.quality());

@@ -1,24 +1,45 @@
-//! One calibration measurement: a robust fit of `(t, c)` to a network flow, with the numbers
-//! the online filter needs to judge it (how much of the flow it explains, and how well).
+//! One calibration measurement: a fit of `(t, c)` on one frame, with the numbers the online
+//! filter needs to judge it. Two kinds of fit produce one: the robust least squares of a
+//! network flow (how much of the flow it explains, and how well), and the direct fit to the
+//! frame's edges ([`crate::direct`]; how well the RGB and amplitude edges then correlate).
 
 use ndarray::{ArrayView2, Zip};
 
 use crate::calibration::Calibration;
+use crate::direct::DirectFit;
 use crate::frame::Flow;
 use crate::geometry::surface::is_valid_depth;
 use crate::geometry::{solve_calibration_robust, LsqError, RobustOptions};
 
-/// A robust calibration fit of one frame.
+/// A calibration fit of one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Measurement {
     /// The fitted `(t_x, t_y, c_x, c_y)`.
     pub calibration: Calibration,
-    /// RMS end-point residual over the inliers, px.
-    pub rms_residual_px: f32,
-    /// Fraction of the usable pixels whose end-point residual is within the inlier threshold.
-    pub inlier_fraction: f32,
-    /// Usable pixels (valid depth, finite flow).
-    pub pixels_used: usize,
+    /// What the fit rests on, and how well it fits.
+    pub evidence: Evidence,
+}
+
+/// What a [`Measurement`] was fitted to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Evidence {
+    /// A dense flow (the rough-flow network's), by robust least squares.
+    Flow {
+        /// RMS end-point residual over the inliers, px.
+        rms_residual_px: f32,
+        /// Fraction of the usable pixels whose end-point residual is within the inlier
+        /// threshold.
+        inlier_fraction: f32,
+        /// Usable pixels (valid depth, finite flow).
+        pixels_used: usize,
+    },
+    /// The frame's RGB and amplitude edges, by the direct fit.
+    Edges {
+        /// Edge-map correlation at the fitted calibration.
+        correlation: f32,
+        /// Edge-map correlation at the calibration the fit started from.
+        initial_correlation: f32,
+    },
 }
 
 impl Measurement {
@@ -58,18 +79,62 @@ impl Measurement {
             });
         Ok(Measurement {
             calibration: c,
-            rms_residual_px: if inliers > 0 {
-                (sum2 / inliers as f64).sqrt() as f32
-            } else {
-                f32::INFINITY
+            evidence: Evidence::Flow {
+                rms_residual_px: if inliers > 0 {
+                    (sum2 / inliers as f64).sqrt() as f32
+                } else {
+                    f32::INFINITY
+                },
+                inlier_fraction: if used > 0 {
+                    inliers as f32 / used as f32
+                } else {
+                    0.0
+                },
+                pixels_used: used,
             },
-            inlier_fraction: if used > 0 {
-                inliers as f32 / used as f32
-            } else {
-                0.0
-            },
-            pixels_used: used,
         })
+    }
+
+    /// The measurement of a direct fit, `None` when the fit fell back to its starting point
+    /// (it then measured nothing).
+    pub fn from_direct_fit(fit: &DirectFit) -> Option<Measurement> {
+        (!fit.fell_back).then_some(Measurement {
+            calibration: fit.calibration,
+            evidence: Evidence::Edges {
+                correlation: fit.correlation,
+                initial_correlation: fit.initial_correlation,
+            },
+        })
+    }
+
+    /// How well the calibration fits its evidence, in `[0, 1]`: for a flow fit
+    /// `inlier_fraction / (1 + rms²)` (rms in px; 1 for a flow the model explains exactly, 0.5
+    /// at 1 px RMS), for an edge fit the edge-map correlation (0 when negative).
+    pub fn fit_quality(&self) -> f32 {
+        let q = match self.evidence {
+            Evidence::Flow {
+                rms_residual_px,
+                inlier_fraction,
+                ..
+            } => inlier_fraction / (1.0 + rms_residual_px * rms_residual_px),
+            Evidence::Edges { correlation, .. } => correlation,
+        };
+        if q.is_nan() {
+            0.0
+        } else {
+            q.clamp(0.0, 1.0)
+        }
+    }
+
+    /// The flow fit's inlier RMS end-point residual, px (`None` for an edge fit, which has no
+    /// end-point residual).
+    pub fn residual_px(&self) -> Option<f32> {
+        match self.evidence {
+            Evidence::Flow {
+                rms_residual_px, ..
+            } => Some(rms_residual_px),
+            Evidence::Edges { .. } => None,
+        }
     }
 }
 
@@ -102,12 +167,16 @@ mod tests {
             }
         }
         let m = Measurement::from_flow(&flow, depth.view(), RobustOptions::default(), 3.0).unwrap();
-        assert!(
-            (m.inlier_fraction - 0.9).abs() < 1e-6,
-            "{}",
-            m.inlier_fraction
-        );
-        assert!(m.rms_residual_px < 0.3, "{}", m.rms_residual_px);
+        let Evidence::Flow {
+            rms_residual_px,
+            inlier_fraction,
+            pixels_used,
+        } = m.evidence
+        else {
+            panic!("a flow fit has flow evidence: {m:?}");
+        };
+        assert!((inlier_fraction - 0.9).abs() < 1e-6, "{inlier_fraction}");
+        assert!(rms_residual_px < 0.3, "{rms_residual_px}");
         assert!(
             (m.calibration.cx - truth.cx).abs() < 0.3,
             "{:?}",
@@ -118,6 +187,6 @@ mod tests {
             "{:?}",
             m.calibration
         );
-        assert_eq!(m.pixels_used, h * w);
+        assert_eq!(pixels_used, h * w);
     }
 }

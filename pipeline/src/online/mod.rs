@@ -1,7 +1,8 @@
 //! Online recalibration (beyond the paper): on a device the weak calibration drifts slowly
 //! compared with the frame rate, so the rough-flow network need not run on every frame.
 //!
-//! - [`measurement`]: one robust `(t, c)` fit of a network flow with its inlier statistics;
+//! - [`measurement`]: one `(t, c)` fit of a frame — a robust fit of a network flow with its
+//!   inlier statistics, or the direct fit to the frame's edges with its edge correlation;
 //! - [`estimator`]: [`OnlineCalibrator`], when to run the network and the robust filter over
 //!   time (admission, innovation gate with jump confirmation, running median), with a quality
 //!   figure;
@@ -16,5 +17,5 @@ pub mod measurement;
 pub mod residual;
 
 pub use estimator::{FrameDecision, OnlineCalibrator, OnlineConfig, Outcome, Rejection, Trigger};
-pub use measurement::Measurement;
+pub use measurement::{Evidence, Measurement};
 pub use residual::{EdgeAlignment, EdgeCheck, EdgeShift};
