@@ -3,8 +3,9 @@
 Reads a capture written by `dear-synth generate` (or any capture with ground truth:
 capture.json + frames/NNNNNN.{rgb,depth,gt,mask}.png), runs OpenCV contrib filters on the
 ToF depth guided by the RGB image, and prints the depth MAE (cm) per input-error class
-(low / mid / high / all) in the format of `dear eval`'s table, with the same definition as
-pipeline/src/metrics.rs (`DepthErrorSplit`):
+(low / mid / high / all) in the format of `dear eval`'s table, with the project's definition
+(`DepthErrorSplit` of train/dear_train/metrics.py, numpy only, which mirrors
+pipeline/src/metrics.rs):
 
 - evaluated pixels: ground truth in (0, 4 m] and inside the ground-truth mask, and a valid
   (> 0) input depth;
@@ -41,7 +42,7 @@ import json
 import sys
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -49,7 +50,11 @@ import numpy as np
 from numpy.typing import NDArray
 from PIL import Image
 
-MAX_EVAL_DEPTH_M = np.float32(4.0)  # metrics::MAX_EVAL_DEPTH_M
+# The metric definitions (numpy only): train/dear_train/metrics.py, usable without the training
+# venv's torch.
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "train"))
+from dear_train.metrics import DepthErrorSplit
+
 CLASSES = ("low", "mid", "high", "outliers")
 
 # Parameter grids; the best of each family (by MAE all) is reported.
@@ -72,43 +77,6 @@ class Frame:
     rgb: U8  # (H, W, 3)
     depth: F32
     gt: F32  # already masked: 0 outside the ground-truth mask
-
-
-@dataclass
-class Split:
-    """metrics::DepthErrorSplit: per-class error sums (m) and counts, and missing pixels."""
-
-    sums: list[float] = field(default_factory=lambda: [0.0] * 4)
-    counts: list[int] = field(default_factory=lambda: [0] * 4)
-    missing: int = 0
-
-    def add_frame(self, inp: F32, out: F32, gt: F32) -> None:
-        sel = (gt > 0) & (gt <= MAX_EVAL_DEPTH_M) & (inp > 0) & np.isfinite(inp)
-        i, o, g = inp[sel], out[sel], gt[sel]  # row-major order, like ndarray's Zip
-        in_err = np.abs(i - g)  # f32, as in Rust
-        order = np.argsort(in_err, kind="stable")
-        n = len(order)
-        cls = np.minimum((4 * np.arange(n)) // max(n, 1), 3)
-        o_sorted = o[order]
-        out_err = np.abs((o_sorted - g[order]).astype(np.float32)).astype(np.float64)
-        ok = (o_sorted > 0) & np.isfinite(o_sorted)
-        self.missing += int((~ok).sum())
-        for k in range(4):
-            m = ok & (cls == k)
-            self.sums[k] += float(out_err[m].sum())
-            self.counts[k] += int(m.sum())
-
-    def mae_cm(self, k: int) -> float | None:
-        return 100.0 * self.sums[k] / self.counts[k] if self.counts[k] else None
-
-    def mae_all_cm(self) -> float | None:
-        n = sum(self.counts)
-        return 100.0 * sum(self.sums) / n if n else None
-
-    def coverage(self) -> float:
-        n = sum(self.counts)
-        total = n + self.missing
-        return n / total if total else 0.0
 
 
 def read_capture(root: Path, limit: int | None) -> Iterator[Frame]:
@@ -189,10 +157,12 @@ def identity(depth: F32, rgb: U8) -> F32:
     return depth
 
 
-def evaluate(frames: list[Frame], methods: dict[str, Filter]) -> dict[str, tuple[Split, float]]:
-    results: dict[str, tuple[Split, float]] = {}
+def evaluate(
+    frames: list[Frame], methods: dict[str, Filter]
+) -> dict[str, tuple[DepthErrorSplit, float]]:
+    results: dict[str, tuple[DepthErrorSplit, float]] = {}
     for name, method in methods.items():
-        split, seconds = Split(), 0.0
+        split, seconds = DepthErrorSplit(), 0.0
         for fr in frames:
             t0 = time.perf_counter()
             out = method(fr.depth, fr.rgb)
@@ -202,7 +172,7 @@ def evaluate(frames: list[Frame], methods: dict[str, Filter]) -> dict[str, tuple
     return results
 
 
-def row(name: str, split: Split, ms: float) -> str:
+def row(name: str, split: DepthErrorSplit, ms: float) -> str:
     def fmt(v: float | None) -> str:
         return "–" if v is None else f"{v:.2f}"
 

@@ -18,11 +18,10 @@ import numpy as np
 import pytest
 import torch
 
-from dear_train.evaluation import (
+from dear_train.evaluation import AepeAccumulator, DepthAccumulator
+from dear_train.metrics import (
     CLASSES,
     MAE_RANGE_M,
-    AepeAccumulator,
-    DepthAccumulator,
     DepthErrorSplit,
     aepe,
     depth_error_classes,
