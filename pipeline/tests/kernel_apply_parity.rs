@@ -3,41 +3,23 @@
 
 #![cfg(feature = "inference")]
 
-use std::path::Path;
+mod common;
 
 use dear_pipeline::model::kernel_apply::{
     apply_gated, blend_classical, GatedKernel, GATED_CHANNELS, HYBRID_CHANNELS,
 };
 use ndarray::{Array2, Array3};
 
-fn array(v: &serde_json::Value) -> (Vec<usize>, Vec<f32>) {
-    let shape = v["shape"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|d| d.as_u64().unwrap() as usize)
-        .collect();
-    let data = v["data"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap() as f32)
-        .collect();
-    (shape, data)
-}
-
 #[test]
 fn gated_tail_matches_pytorch() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/kernel_apply/gated.json");
-    let doc: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-    let (ds, dd) = array(&doc["depth"]);
+    let doc = fixture("gated.json");
+    let (ds, dd) = common::f32_array(&doc["depth"]);
     let depth = Array2::from_shape_vec((ds[0], ds[1]), dd).unwrap();
-    let (ms, md) = array(&doc["maps"]);
+    let (ms, md) = common::f32_array(&doc["maps"]);
     assert_eq!(ms[0], GATED_CHANNELS);
     let maps3 = Array3::from_shape_vec((ms[0], ms[1], ms[2]), md).unwrap();
     let maps: Vec<Array2<f32>> = maps3.outer_iter().map(|m| m.to_owned()).collect();
-    let (_, want) = array(&doc["out"]);
+    let (_, want) = common::f32_array(&doc["out"]);
     let kernel = GatedKernel {
         stride: doc["stride"].as_u64().unwrap() as usize,
         max_bias: 0.05,
@@ -66,14 +48,11 @@ fn gated_tail_matches_pytorch() {
 }
 
 fn fixture(name: &str) -> serde_json::Value {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../fixtures/kernel_apply")
-        .join(name);
-    serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap()
+    common::load_fixture(&format!("kernel_apply/{name}"))
 }
 
 fn plane(v: &serde_json::Value) -> Array2<f32> {
-    let (s, d) = array(v);
+    let (s, d) = common::f32_array(v);
     Array2::from_shape_vec((s[0], s[1]), d).unwrap()
 }
 
@@ -82,7 +61,7 @@ fn hybrid_tail_matches_pytorch() {
     let doc = fixture("hybrid.json");
     let depth = plane(&doc["depth"]);
     let classical = plane(&doc["classical"]);
-    let (ms, md) = array(&doc["maps"]);
+    let (ms, md) = common::f32_array(&doc["maps"]);
     assert_eq!(ms[0], HYBRID_CHANNELS);
     let maps3 = Array3::from_shape_vec((ms[0], ms[1], ms[2]), md).unwrap();
     let maps: Vec<Array2<f32>> = maps3.outer_iter().map(|m| m.to_owned()).collect();

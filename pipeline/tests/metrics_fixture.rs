@@ -7,7 +7,7 @@
 //! stacking the frames into one), other quarter boundaries, other tie-breaking or counting an
 //! invalid output all give different figures.
 
-use std::path::Path;
+mod common;
 
 use dear_pipeline::metrics::{aepe, DepthErrorSplit, CLASSES, MAX_EVAL_DEPTH_M};
 use dear_pipeline::Flow;
@@ -19,43 +19,22 @@ use serde_json::Value;
 const TOL: f64 = 1e-9;
 
 fn load(name: &str) -> Value {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../fixtures/metrics")
-        .join(format!("{name}.json"));
-    serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap()
+    common::load_fixture(&format!("metrics/{name}.json"))
 }
 
-fn shape(v: &Value) -> (usize, usize) {
-    let s: Vec<usize> = v["shape"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|d| d.as_u64().unwrap() as usize)
-        .collect();
-    assert_eq!(s.len(), 2);
-    (s[0], s[1])
+fn plane<T>((shape, data): (Vec<usize>, Vec<T>)) -> Array2<T> {
+    assert_eq!(shape.len(), 2, "a plane has two dimensions: {shape:?}");
+    Array2::from_shape_vec((shape[0], shape[1]), data).unwrap()
 }
 
 fn f32s(v: &Value) -> Array2<f32> {
     assert_eq!(v["dtype"], "f32");
-    let data = v["data"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap() as f32)
-        .collect();
-    Array2::from_shape_vec(shape(v), data).unwrap()
+    plane(common::f32_array(v))
 }
 
 fn bools(v: &Value) -> Array2<bool> {
     assert_eq!(v["dtype"], "bool");
-    let data = v["data"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_bool().unwrap())
-        .collect();
-    Array2::from_shape_vec(shape(v), data).unwrap()
+    plane(common::bool_array(v))
 }
 
 fn u64s(v: &Value) -> Vec<u64> {

@@ -11,6 +11,7 @@ use dear_pipeline::dear::{
     CachedFusion, ChainError, ChainInput, ChainMode, ChainOptions, ChainOutput, DearChain,
 };
 use dear_pipeline::geometry::warp_depth;
+use dear_pipeline::metrics;
 use dear_pipeline::model::ModelBundle;
 use dear_pipeline::online::Evidence;
 use dear_pipeline::{Calibration, Flow};
@@ -395,18 +396,8 @@ fn cached_fusion_choice_on_ground_truth() {
 fn full_mode_refines_the_network_calibration_by_the_direct_fit() {
     let p = Parity::load();
     let gt_flow = p.flow("gt_flow");
-    let gt_depth = p.plane("gt_depth", 0);
-    let aepe = |f: &Flow| {
-        let (mut sum, mut n) = (0.0f64, 0usize);
-        for ((y, x), &z) in gt_depth.indexed_iter() {
-            if z > 0.0 {
-                let d = (f.u[[y, x]] - gt_flow.u[[y, x]]).hypot(f.v[[y, x]] - gt_flow.v[[y, x]]);
-                sum += f64::from(d);
-                n += 1;
-            }
-        }
-        sum / n as f64
-    };
+    let valid = p.plane("gt_depth", 0).mapv(|z| z > 0.0);
+    let aepe = |f: &Flow| metrics::aepe(f, &gt_flow, valid.view()).unwrap();
     let mut paper = DearChain::with_options(&bundle(), p.w, p.h, paper_chain()).unwrap();
     run(&mut paper, &p, ChainMode::Full);
     let paper_aepe = aepe(paper.flow_refined());
