@@ -39,10 +39,11 @@
 //!   and, in the same pass, six layers of inverse depth separately. The correlation along `t`
 //!   is sharply peaked (near objects move by `t/z`, tens of pixels, for a small change of `t`),
 //!   and `t` held at its initial value is a local maximum, so Gauss–Newton alone cannot find
-//!   `t`: the line `flow = t/z + c` through the layers' peaks (every pair tried, each scored by
-//!   the layers' correlations at the offsets it predicts) gives the start point that has it.
-//!   The best global offsets and that line are refined by Gauss–Newton at the coarsest level,
-//!   the best one then level by level up to full resolution.
+//!   `t`: lines `flow = t/z + c` through the layers' peaks (every pair tried, each scored by
+//!   the layers' correlations at the offsets it predicts) give start points that have it.
+//!   The best global offsets and the best few distinct lines are refined by Gauss–Newton at
+//!   the coarsest level, the one with the highest correlation then level by level up to full
+//!   resolution.
 //! - **When `t` is not observable.** If the edges' inverse depths barely spread (a wall facing
 //!   the camera), `t` and `c` cannot be told apart and `t` is held at its initial value; only
 //!   `c` is fitted.
@@ -72,6 +73,9 @@ pub struct DirectFitParams {
     pub search_radius_px: f32,
     /// Local maxima of the search refined at the coarsest level before one is kept.
     pub search_candidates: usize,
+    /// Lines `flow = t/z + c` through the depth layers' peaks refined at the coarsest level
+    /// (the best-scoring distinct ones) before one is kept.
+    pub search_lines: usize,
     /// Gaussian blur of both edge maps at every level, in that level's px.
     pub blur_sigma: f32,
     /// Weight of the depth-discontinuity edges in the ToF edge map (0 = amplitude only).
@@ -111,6 +115,7 @@ impl Default for DirectFitParams {
             coarse_width: 80,
             search_radius_px: 32.0,
             search_candidates: 3,
+            search_lines: 6,
             blur_sigma: 1.0,
             depth_edge_weight: 0.0,
             contour_radius: 0,
@@ -807,7 +812,7 @@ fn search_offsets(level: &Level, initial: &Theta, params: &DirectFitParams) -> V
                 })
                 .sum()
         };
-        let mut best_line: Option<(f64, [f64; 4])> = None;
+        let mut lines: Vec<(f64, [f64; 4])> = Vec::new();
         for (n1, &(k1, u1, v1)) in peaks.iter().enumerate() {
             for &(k2, u2, v2) in &peaks[n1 + 1..] {
                 let da = layer_a[k2] - layer_a[k1];
@@ -816,13 +821,31 @@ fn search_offsets(level: &Level, initial: &Theta, params: &DirectFitParams) -> V
                 }
                 let (tu, tv) = ((u2 - u1) / da, (v2 - v1) / da);
                 let (cu, cv) = (u1 - tu * layer_a[k1], v1 - tv * layer_a[k1]);
-                let sc = score_line(tu, tv, cu, cv);
-                if best_line.is_none_or(|(b, _)| sc > b) {
-                    best_line = Some((sc, [tu, tv, cu, cv]));
-                }
+                lines.push((score_line(tu, tv, cu, cv), [tu, tv, cu, cv]));
             }
         }
-        if let Some((_, [tu, tv, cu, cv])) = best_line {
+        lines.sort_by(|a, b| b.0.total_cmp(&a.0));
+        // The best few lines that predict different offsets (by more than a level px at some
+        // layer) all go on to Gauss–Newton, and the global correlation decides: the layers'
+        // own scores do not always rank the true line first, because an occluding contour
+        // correlates both with its own offset and with the background's (the best line alone:
+        // mean AEPE 2.01 px at σ = 4 on the RESULTS set, six lines 1.53 px).
+        let mut kept: Vec<[f64; 4]> = Vec::new();
+        for (_, line) in lines {
+            if kept.len() >= params.search_lines.max(1) {
+                break;
+            }
+            let distinct = kept.iter().all(|k| {
+                layer_a.iter().any(|&a| {
+                    ((line[0] - k[0]) * a + line[2] - k[2]).abs() > 1.0
+                        || ((line[1] - k[1]) * a + line[3] - k[3]).abs() > 1.0
+                })
+            });
+            if distinct {
+                kept.push(line);
+            }
+        }
+        for [tu, tv, cu, cv] in kept {
             // Offsets (level px, relative to the initial flow) → calibration (full px).
             let mut theta = *initial;
             theta.p[0] += tu * scale;
