@@ -57,6 +57,10 @@ def variant_of(report: dict[str, Report], bundle: str) -> str:
         "kpn": "ToF-KPN",
         "gated": "gated KPN",
         "hybrid": "hybrid (gated KPN on the classical filter)",
+        "unet": "U-Net, paper Table 2",
+        "nonormaftbias": "vanilla KPN, paper Table 3",
+        "norgb": "ToF-KPN without RGB, paper Table 3",
+        "deeptof": "DeepToF, paper Table 2",
     }.get(variant, variant)
 
 

@@ -13,7 +13,7 @@
 #      daemon's processing per frame (deard-bench, 640×480 and 320×240);
 #   4. assembles the tables, the paper comparison and the figures into RESULTS.md
 #      (scripts/results.py).
-# About 25 minutes on the 2-core development machine once the binaries are built.
+# About 50 minutes on the 2-core development machine once the binaries are built.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
@@ -61,16 +61,28 @@ if [ ! -f "$data/vga_sequence/capture.json" ]; then
 fi
 
 # The shipped bundle first (the figures show the first bundle), then the others for comparison.
+# The paper's Table 2/3 ablation bundles (training profile cpu-ablation) share the shipped
+# flow networks and differ only in the refiner, so they run on the refinement sets (aligned
+# input) only.
 bundles=(--bundle models/edge)
+ablations=()
 for b in models/*/; do
-    [ "${b%/}" != models/edge ] && [ -f "$b/model.json" ] && bundles+=(--bundle "${b%/}")
+    [ "${b%/}" != models/edge ] && [ -f "$b/model.json" ] || continue
+    profile=$(.venv/bin/python -c 'import json, sys; print(json.load(open(sys.argv[1]))["training"]["profile"])' "$b/model.json")
+    if [ "$profile" = cpu-ablation ]; then
+        ablations+=(--bundle "${b%/}")
+    else
+        bundles+=(--bundle "${b%/}")
+    fi
 done
 for set in aligned sigma2 sigma4 sigma6 heldout heldout-sigma4; do
     figures=0
+    extra=()
     # Pictures of refinement on aligned input and of the whole pipeline at σ = 4 px.
     case $set in aligned | sigma4 | heldout) figures=2 ;; esac
+    case $set in aligned | heldout) extra=("${ablations[@]}") ;; esac
     echo "== dear eval on $set"
-    target/release/dear eval --capture "$data/$set" --baselines "${bundles[@]}" \
+    target/release/dear eval --capture "$data/$set" --baselines "${bundles[@]}" "${extra[@]}" \
         --figures "$figures" --out "$out/$set" > /dev/null
 done
 echo "== dear eval --online on the drifting sequence"
