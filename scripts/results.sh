@@ -61,14 +61,16 @@ if [ ! -f "$data/vga_sequence/capture.json" ]; then
 fi
 
 # The shipped bundle first (the figures show the first bundle), then the others for comparison.
-# The paper's Table 2/3 ablation bundles (training profile cpu-ablation) share the shipped
+# The paper's Table 2/3 ablation bundles (refiner trained with the profile cpu-ablation) share the shipped
 # flow networks and differ only in the refiner, so they run on the refinement sets (aligned
 # input) only.
 bundles=(--bundle models/edge)
 ablations=()
 for b in models/*/; do
     [ "${b%/}" != models/edge ] && [ -f "$b/model.json" ] || continue
-    profile=$(.venv/bin/python -c 'import json, sys; print(json.load(open(sys.argv[1]))["training"]["profile"])' "$b/model.json")
+    profile=$(.venv/bin/python -c 'import json, sys
+refine = json.load(open(sys.argv[1]))["training"].get("refine") or {}
+print((refine.get("profile") or {}).get("name", ""))' "$b/model.json")
     if [ "$profile" = cpu-ablation ]; then
         ablations+=(--bundle "${b%/}")
     else
