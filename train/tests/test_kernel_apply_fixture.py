@@ -7,9 +7,9 @@ constants of the gated refiner change without the fixture being regenerated.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import types
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -20,17 +20,11 @@ from dear_train.models import build_refine
 FIXTURE = Path(__file__).resolve().parents[2] / "fixtures" / "kernel_apply"
 
 
-def _maker() -> types.ModuleType:
-    spec = importlib.util.spec_from_file_location("make_gated", FIXTURE / "make_gated.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_fixture_matches_the_python_definition() -> None:
+def test_fixture_matches_the_python_definition(
+    fixture_maker: Callable[[Path], types.ModuleType],
+) -> None:
     doc = json.loads((FIXTURE / "gated.json").read_text())
-    make = _maker()
+    make = fixture_maker(FIXTURE / "make_gated.py")
     c = make.case()
     for k in ("depth", "maps"):
         np.testing.assert_array_equal(np.array(doc[k]["data"], np.float32), c[k].ravel())
@@ -47,9 +41,11 @@ def test_fixture_constants_are_the_exported_ones() -> None:
     assert (apply["max_bias"], apply["range_scale"]) == (0.05, 100.0)
 
 
-def test_hybrid_fixture_matches_the_python_definition() -> None:
+def test_hybrid_fixture_matches_the_python_definition(
+    fixture_maker: Callable[[Path], types.ModuleType],
+) -> None:
     doc = json.loads((FIXTURE / "hybrid.json").read_text())
-    make = _maker()
+    make = fixture_maker(FIXTURE / "make_gated.py")
     c = make.hybrid_case()
     for k in ("depth", "classical", "maps"):
         np.testing.assert_array_equal(np.array(doc[k]["data"], np.float32), c[k].ravel())

@@ -9,9 +9,9 @@ other quarter boundaries, other tie-breaking or counting invalid outputs all fai
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import types
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -148,15 +148,9 @@ def test_aepe_matches_the_fixture() -> None:
     assert batched.result() == pytest.approx(want["mean_over_frames"], abs=1e-9)
 
 
-def _maker() -> types.ModuleType:
-    spec = importlib.util.spec_from_file_location("make_metrics", FIXTURE / "make_metrics.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_committed_fixture_is_what_the_generator_writes() -> None:
-    make = _maker()
+def test_committed_fixture_is_what_the_generator_writes(
+    fixture_maker: Callable[[Path], types.ModuleType],
+) -> None:
+    make = fixture_maker(FIXTURE / "make_metrics.py")
     assert load("depth_error_split") == json.loads(json.dumps(make.depth_doc()))
     assert load("aepe") == json.loads(json.dumps(make.aepe_doc()))
