@@ -122,6 +122,11 @@ pub struct PipelineConfig {
     /// With `calibration = "online"`: fraction of the per-frame edge-alignment correction of
     /// the principal point applied between network runs (0 turns tracking off; 0.7 default).
     pub online_track_gain: f32,
+    /// With `calibration = "online"`: where the rough-flow network runs. `"background"` (the
+    /// default): on a worker thread of lower priority, so no frame waits for it (its
+    /// calibration applies from the first frame after it is ready); `"inline"`: on the frame
+    /// that asked for it, which then takes the network's time (deterministic, as `dear eval`).
+    pub online_network: NetworkPlacement,
     /// Static calibration for `classical`/`none`, and the DEAR engine's fallback before its
     /// first estimate; none = the capture's `initial_calibration`. Finite, `|t| ≤`
     /// [`MAX_CALIBRATION_T`] px·m and `|c| ≤` [`MAX_CALIBRATION_C`] px here; at start-up
@@ -137,6 +142,7 @@ impl Default for PipelineConfig {
             calibration: CalibrationMode::Online,
             online_interval_frames: 30,
             online_track_gain: 0.7,
+            online_network: NetworkPlacement::Background,
             static_calibration: None,
         }
     }
@@ -160,6 +166,16 @@ pub enum CalibrationMode {
     Online,
     /// The paper's chain on every frame: flow network, least squares, fusion.
     EveryFrame,
+}
+
+/// Where the online mode's network frames run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum NetworkPlacement {
+    /// On a background worker; frames never wait for it.
+    Background,
+    /// On the frame that asked for it.
+    Inline,
 }
 
 /// Process-level behaviour.

@@ -6,7 +6,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use clap::Parser;
-use deard::config::{CalibrationMode, Config, Pacing, RefineMode};
+use deard::config::{CalibrationMode, Config, NetworkPlacement, Pacing, RefineMode};
 
 // tract allocates every intermediate tensor per inference; with glibc's malloc each one above
 // the mmap threshold (a 32-channel 640×480 map is 39 MB) comes back as fresh zeroed pages.
@@ -54,6 +54,9 @@ struct Cli {
     /// Frames between rough-flow runs in online mode ([pipeline] online_interval_frames).
     #[arg(long)]
     online_interval: Option<u32>,
+    /// Where online mode's network frames run: background or inline ([pipeline] online_network).
+    #[arg(long, value_parser = parse_network)]
+    online_network: Option<NetworkPlacement>,
     /// Exit when a non-looping replay ends ([runtime] exit_when_done).
     #[arg(long)]
     exit_when_done: bool,
@@ -63,6 +66,16 @@ struct Cli {
     /// Print the effective configuration as TOML and exit.
     #[arg(long)]
     print_config: bool,
+}
+
+fn parse_network(s: &str) -> Result<NetworkPlacement, String> {
+    match s {
+        "background" => Ok(NetworkPlacement::Background),
+        "inline" => Ok(NetworkPlacement::Inline),
+        _ => Err(format!(
+            "unknown placement {s:?}; choose background or inline"
+        )),
+    }
 }
 
 fn parse_pacing(s: &str) -> Result<Pacing, String> {
@@ -129,6 +142,9 @@ fn effective_config(cli: &Cli) -> Result<Config, String> {
     }
     if let Some(n) = cli.online_interval {
         config.pipeline.online_interval_frames = n;
+    }
+    if let Some(placement) = cli.online_network {
+        config.pipeline.online_network = placement;
     }
     if cli.exit_when_done {
         config.runtime.exit_when_done = true;

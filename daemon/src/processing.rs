@@ -12,15 +12,18 @@
 use std::time::{Duration, Instant};
 
 use dear_pipeline::align::StaticAligner;
-use dear_pipeline::dear::{ChainInput, ChainMode, ChainOutput, DearChain};
+use dear_pipeline::dear::{
+    BackgroundCalibrator, ChainInput, ChainMode, ChainOutput, DearChain, Submit,
+};
 use dear_pipeline::filter::ClassicalRefiner;
+use dear_pipeline::geometry::LsqError;
 use dear_pipeline::model::ModelBundle;
-use dear_pipeline::online::{OnlineCalibrator, OnlineConfig};
+use dear_pipeline::online::{Measurement, NetworkTicket, OnlineCalibrator, OnlineConfig};
 use dear_pipeline::{Calibration, RgbdFrame};
 use dear_proto::{flags, FrameHeader, Stage};
 use ndarray::{Array2, ArrayViewMut2, ArrayViewMut3};
 
-use crate::config::{CalibrationMode, PipelineConfig, RefineMode};
+use crate::config::{CalibrationMode, NetworkPlacement, PipelineConfig, RefineMode};
 
 /// The output planes of one frame (views over the shared-memory payload).
 pub struct FrameOutput<'a> {
@@ -43,6 +46,8 @@ enum Engine {
     Dear {
         chain: Box<DearChain>,
         online: Option<OnlineCalibrator>,
+        /// Online mode with `online_network = "background"`: the network frames' worker.
+        background: Option<BackgroundCalibrator<NetworkTicket>>,
         bundle_name: String,
     },
 }
@@ -109,6 +114,22 @@ impl Processor {
             })),
             CalibrationMode::EveryFrame => None,
         };
+        let background = match (&online, config.online_network) {
+            (Some(_), NetworkPlacement::Background) => {
+                // The worker's own chain: its buffers and tract states are its own.
+                let worker_chain = DearChain::new(&bundle, width as usize, height as usize)
+                    .map_err(|e| {
+                        format!(
+                            "cannot prepare the model bundle {} for {width}x{height}: {e}",
+                            dir.display()
+                        )
+                    })?;
+                let worker = BackgroundCalibrator::spawn(worker_chain, "deard-calibrate")
+                    .map_err(|e| format!("cannot start the calibration worker thread: {e}"))?;
+                Some(worker)
+            }
+            _ => None,
+        };
         let manifest = bundle.manifest();
         let bundle_name = format!("{}/{}", manifest.tier, manifest.variant);
         Ok(Processor {
@@ -118,6 +139,7 @@ impl Processor {
             engine: Engine::Dear {
                 chain: Box::new(chain),
                 online,
+                background,
                 bundle_name,
             },
         })
@@ -198,15 +220,42 @@ impl Processor {
             Engine::Dear {
                 chain,
                 online,
+                background,
                 bundle_name,
             } => {
-                let mode = online
-                    .as_mut()
-                    .map_or(ChainMode::Full, |o| o.begin_frame().chain_mode());
                 let input = ChainInput {
                     rgb: frame.rgb.view(),
                     amplitude: frame.amplitude.view(),
                     depth: frame.depth.view(),
+                };
+                // A background measurement that finished since the last frame goes to the
+                // estimator before this frame's decision, so this frame already uses it.
+                let delivered = match (background.as_mut(), online.as_mut()) {
+                    (Some(worker), Some(online)) => deliver_background(worker, online),
+                    _ => None,
+                };
+                let mode = match (online.as_mut(), background.as_mut()) {
+                    (None, _) => ChainMode::Full,
+                    (Some(online), None) => online.begin_frame().chain_mode(),
+                    (Some(online), Some(worker)) => {
+                        let decision = online.begin_frame();
+                        if decision.run_network.is_some() {
+                            if worker.is_busy() || worker.is_stopped() {
+                                online.network_busy();
+                            } else {
+                                let ticket = online.defer_network();
+                                // A frame of the wrong shape fails `process` below too.
+                                if let Ok(Submit::Stopped) = worker.try_submit(input, ticket) {
+                                    tracing::error!(
+                                        "the calibration worker stopped; the calibration is \
+                                         now tracked from the edges only"
+                                    );
+                                }
+                            }
+                        }
+                        // Before the first estimate: the static calibration.
+                        ChainMode::Cached(decision.calibration.unwrap_or(self.calibration))
+                    }
                 };
                 let output = ChainOutput {
                     depth: out.depth.view_mut(),
@@ -215,13 +264,11 @@ impl Processor {
                 let report = chain
                     .process(input, mode, output)
                     .map_err(|e| format!("frame {}: {e}", frame.index))?;
-                let fit = report
-                    .measurement
-                    .as_ref()
-                    .and_then(|m| m.as_ref().ok())
-                    .copied();
+                // This frame's network measurement: inline, or delivered by the worker.
+                let network_measurement = report.measurement.as_ref().or(delivered.as_ref());
+                let fit = network_measurement.and_then(|m| m.as_ref().ok()).copied();
                 header.flags = flags::ALIGNED | flags::REFINED_NETWORK;
-                if report.ran_flow_network {
+                if report.ran_flow_network || delivered.is_some() {
                     header.flags |= flags::CALIBRATION_ESTIMATED;
                 }
                 header.set_bundle_name(bundle_name);
@@ -257,6 +304,33 @@ impl Processor {
             }
         }
         Ok(())
+    }
+}
+
+/// Hands a finished background measurement, if any, to the estimator; returns it (or `None`
+/// when none finished, or the network failed on its frame, which is logged and counted as a
+/// rejected attempt).
+fn deliver_background(
+    worker: &mut BackgroundCalibrator<NetworkTicket>,
+    online: &mut OnlineCalibrator,
+) -> Option<Result<Measurement, LsqError>> {
+    let delivered = worker.poll()?;
+    match delivered.report {
+        Ok(report) => {
+            let outcome = online.deliver(delivered.ticket, report.measurement.clone());
+            tracing::debug!(
+                frame = delivered.ticket.frame,
+                elapsed_ms = delivered.elapsed.as_secs_f64() * 1e3,
+                ?outcome,
+                "background calibration delivered"
+            );
+            Some(report.measurement)
+        }
+        Err(e) => {
+            tracing::warn!(frame = delivered.ticket.frame, error = %e, "background calibration failed");
+            online.deliver_failure();
+            None
+        }
     }
 }
 

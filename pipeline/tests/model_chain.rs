@@ -421,3 +421,49 @@ fn full_mode_refines_the_network_calibration_by_the_direct_fit() {
     println!("parity frame AEPE: paper chain {paper_aepe:.3} px, with the direct fit {direct_aepe:.3} px");
     assert!(direct_aepe < paper_aepe, "{direct_aepe} vs {paper_aepe}");
 }
+
+/// The background worker measures a frame exactly as a `Full` frame does inline, never makes
+/// its caller wait, takes one frame at a time, and refuses a frame of the wrong shape.
+#[test]
+fn the_background_worker_measures_what_a_full_frame_measures() {
+    use dear_pipeline::dear::{BackgroundCalibrator, Submit};
+    let p = Parity::load();
+    let mut inline = DearChain::new(&bundle(), p.w, p.h).unwrap();
+    let (report, _) = run(&mut inline, &p, ChainMode::Full);
+    let full = report.measurement.unwrap();
+    // `measure` alone gives the same measurement as the full frame.
+    let rgb = p.rgb();
+    let input = ChainInput {
+        rgb: rgb.view(),
+        amplitude: p.plane("amplitude_raw", 0),
+        depth: p.plane("tof_depth", 0),
+    };
+    let measured = inline.measure(input).unwrap();
+    assert_eq!(measured.measurement, full);
+    assert!(measured.ran_direct_fit);
+
+    let worker_chain = DearChain::new(&bundle(), p.w, p.h).unwrap();
+    let mut worker = BackgroundCalibrator::spawn(worker_chain, "test-calibrate").unwrap();
+    assert!(worker.poll().is_none(), "nothing submitted yet");
+    assert_eq!(worker.try_submit(input, 7u32).unwrap(), Submit::Started);
+    assert!(worker.is_busy());
+    // One frame at a time: a second submission while the first runs is refused, not queued.
+    assert_eq!(worker.try_submit(input, 8u32).unwrap(), Submit::Busy);
+    let delivered = worker.wait().expect("the submitted frame's measurement");
+    assert_eq!(delivered.ticket, 7);
+    assert_eq!(delivered.report.unwrap().measurement, full);
+    assert!(!worker.is_busy() && !worker.is_stopped());
+
+    // A wrong shape is an error naming the plane, and the worker stays usable.
+    let small = Array2::<f32>::zeros((p.h - 1, p.w));
+    let bad = ChainInput {
+        depth: small.view(),
+        ..input
+    };
+    match worker.try_submit(bad, 9) {
+        Err(ChainError::Shape { what, .. }) => assert_eq!(what, "depth"),
+        other => panic!("expected a shape error, got {other:?}"),
+    }
+    assert_eq!(worker.try_submit(input, 10).unwrap(), Submit::Started);
+    assert_eq!(worker.wait().unwrap().ticket, 10);
+}

@@ -21,7 +21,7 @@ use clap::Parser;
 use dear_pipeline::capture::CaptureDir;
 use dear_pipeline::RgbdFrame;
 use dear_proto::{flags, FrameHeader, Stage};
-use deard::config::{CalibrationMode, PipelineConfig, RefineMode};
+use deard::config::{CalibrationMode, NetworkPlacement, PipelineConfig, RefineMode};
 use deard::processing::{FrameOutput, Processor};
 use ndarray::{Array2, Array3};
 use serde::Serialize;
@@ -49,6 +49,14 @@ struct Cli {
     /// Frames between rough-flow runs in online mode ([pipeline] online_interval_frames).
     #[arg(long, default_value_t = PipelineConfig::default().online_interval_frames)]
     online_interval: u32,
+    /// Where online mode's network frames run: background (the daemon's default) or inline
+    /// ([pipeline] online_network).
+    #[arg(long, default_value = "background", value_parser = parse_network)]
+    online_network: NetworkPlacement,
+    /// Offer frames at this rate, as a camera does (0: back to back). A frame that took longer
+    /// than its period is followed at once by the next.
+    #[arg(long, default_value_t = 0.0)]
+    fps: f64,
     /// Modes to measure: online, every-frame (repeatable; default both).
     #[arg(long = "mode", value_parser = parse_mode)]
     modes: Vec<CalibrationMode>,
@@ -62,6 +70,16 @@ fn parse_mode(s: &str) -> Result<CalibrationMode, String> {
         "online" => Ok(CalibrationMode::Online),
         "every-frame" => Ok(CalibrationMode::EveryFrame),
         _ => Err(format!("unknown mode {s:?}; choose online or every-frame")),
+    }
+}
+
+fn parse_network(s: &str) -> Result<NetworkPlacement, String> {
+    match s {
+        "background" => Ok(NetworkPlacement::Background),
+        "inline" => Ok(NetworkPlacement::Inline),
+        _ => Err(format!(
+            "unknown placement {s:?}; choose background or inline"
+        )),
     }
 }
 
@@ -122,6 +140,10 @@ struct Report {
     width: u32,
     height: u32,
     threads_available: usize,
+    /// `background` or `inline`.
+    online_network: &'static str,
+    /// Frames offered per second (0: back to back).
+    fps: f64,
     modes: Vec<ModeReport>,
 }
 
@@ -161,12 +183,17 @@ fn run(cli: &Cli) -> Result<(), String> {
         cli.modes.clone()
     };
     println!(
-        "deard-bench: {} at {width}x{height} ({} frames, looped), bundle {}, {} measured + {} warm-up frames per mode",
+        "deard-bench: {} at {width}x{height} ({} frames, looped), bundle {}, {} measured + {} warm-up frames per mode, online network {}, {}",
         cli.capture.display(),
         frames.len(),
         cli.bundle.display(),
         cli.frames,
-        cli.warmup
+        cli.warmup,
+        match cli.online_network {
+            NetworkPlacement::Background => "in the background",
+            NetworkPlacement::Inline => "inline",
+        },
+        if cli.fps > 0.0 { format!("frames offered at {} fps", cli.fps) } else { "frames back to back".to_owned() }
     );
     let mut reports = Vec::new();
     for mode in modes {
@@ -175,10 +202,19 @@ fn run(cli: &Cli) -> Result<(), String> {
             bundle: cli.bundle.clone(),
             calibration: mode,
             online_interval_frames: cli.online_interval,
+            online_network: cli.online_network,
             ..PipelineConfig::default()
         };
         let mut processor = Processor::from_config(width, height, calibration, &config)?;
-        let report = measure(&mut processor, &frames, mode, cli.warmup, cli.frames)?;
+        let period = (cli.fps > 0.0).then(|| std::time::Duration::from_secs_f64(1.0 / cli.fps));
+        let report = measure(
+            &mut processor,
+            &frames,
+            mode,
+            cli.warmup,
+            cli.frames,
+            period,
+        )?;
         print_report(&report);
         reports.push(report);
     }
@@ -189,6 +225,11 @@ fn run(cli: &Cli) -> Result<(), String> {
             width,
             height,
             threads_available: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            online_network: match cli.online_network {
+                NetworkPlacement::Background => "background",
+                NetworkPlacement::Inline => "inline",
+            },
+            fps: cli.fps,
             modes: reports,
         };
         let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
@@ -204,6 +245,7 @@ fn measure(
     mode: CalibrationMode,
     warmup: usize,
     measured: usize,
+    period: Option<std::time::Duration>,
 ) -> Result<ModeReport, String> {
     let (h, w) = frames[0].dim();
     let mut depth = Array2::<f32>::zeros((h, w));
@@ -219,7 +261,15 @@ fn measure(
     let (mut with, mut without) = (Vec::new(), Vec::new());
     let mut stage_ms: Vec<Vec<f64>> = vec![Vec::new(); stages.len()];
     let mut rss_after_warmup = None;
+    let mut next_frame = Instant::now();
     for i in 0..warmup + measured {
+        if let Some(period) = period {
+            let now = Instant::now();
+            if next_frame > now {
+                std::thread::sleep(next_frame - now);
+            }
+            next_frame = next_frame.max(now) + period;
+        }
         if i == warmup {
             rss_after_warmup = resident_mib();
         }

@@ -319,15 +319,7 @@ impl DearChain {
         let mut clock = Stopwatch::start();
 
         // 1. Preprocess.
-        rgb_planes_into(input.rgb, &mut self.rgb);
-        let amplitude_scale = normalize_amplitude_into(
-            input.amplitude,
-            input.depth,
-            self.norm.amplitude_percentile,
-            &mut self.scratch,
-            self.amplitude.view_mut(),
-        );
-        clock.lap(&mut t.preprocess);
+        let amplitude_scale = self.preprocess(input, &mut t, &mut clock);
 
         let mut measurement = None;
         let calibration;
@@ -335,36 +327,9 @@ impl DearChain {
         let mut ran_direct_fit = false;
         match mode {
             ChainMode::Full => {
-                // 2. Rough flow.
-                let [r, g, b] = &self.rgb;
-                self.runner.flow(
-                    [r.view(), g.view(), b.view()],
-                    self.amplitude.view(),
-                    &mut self.flow_rough,
-                )?;
-                clock.lap(&mut t.flow);
-                // 3.–5. D_rgb, robust least squares, W_convt (W_rough where D_rgb is invalid).
-                warp_depth(input.depth, &self.flow_rough, self.depth_rgb.view_mut());
-                let fit = Measurement::from_flow(
-                    &self.flow_rough,
-                    self.depth_rgb.view(),
-                    self.options.robust,
-                    self.options.inlier_threshold_px,
-                );
-                // The direct fit to the frame's edges, started from the network's calibration.
-                let direct = match (&self.options.direct_fit, &fit) {
-                    (Some(params), Ok(network)) => {
-                        ran_direct_fit = true;
-                        Measurement::from_direct_fit(&estimate_calibration_direct(
-                            input.rgb,
-                            input.amplitude,
-                            input.depth,
-                            network.calibration,
-                            params,
-                        ))
-                    }
-                    _ => None,
-                };
+                let NetworkFit { fit, direct } = self.network_fit(input, &mut t, &mut clock)?;
+                ran_direct_fit = direct.is_some();
+                let direct = direct.flatten();
                 if let Some(direct) = direct {
                     // Aligned by a calibration, exactly as a `Cached` frame.
                     calibration = Some(direct.calibration);
@@ -466,6 +431,93 @@ impl DearChain {
         })
     }
 
+    /// The calibration measurement of a `Full` frame alone — preprocessing, the rough-flow
+    /// network, its robust least-squares fit and (by default) the direct fit to the frame's
+    /// edges — without aligning or refining anything. This is what a background worker runs
+    /// so that network frames never hold up the frame path (`DearChain::process` in `Cached`
+    /// mode does the rest); the measurement is the one [`ChainReport::measurement`] would carry.
+    ///
+    /// # Errors
+    /// As [`process`](Self::process) (no output is written, so only the inputs are checked).
+    pub fn measure(&mut self, input: ChainInput<'_>) -> Result<MeasureReport, ChainError> {
+        self.check_input_shapes(&input)?;
+        let mut t = StageTimings::default();
+        let mut clock = Stopwatch::start();
+        self.preprocess(input, &mut t, &mut clock);
+        let NetworkFit { fit, direct } = self.network_fit(input, &mut t, &mut clock)?;
+        clock.lap(&mut t.calibrate);
+        let ran_direct_fit = direct.is_some();
+        let measurement = match direct.flatten() {
+            Some(direct) => Ok(direct),
+            None => fit,
+        };
+        Ok(MeasureReport {
+            measurement,
+            ran_direct_fit,
+            timings: t,
+        })
+    }
+
+    /// Step 1: the RGB planes and the normalised amplitude. Returns the amplitude scale.
+    fn preprocess(
+        &mut self,
+        input: ChainInput<'_>,
+        t: &mut StageTimings,
+        clock: &mut Stopwatch,
+    ) -> Option<f32> {
+        rgb_planes_into(input.rgb, &mut self.rgb);
+        let scale = normalize_amplitude_into(
+            input.amplitude,
+            input.depth,
+            self.norm.amplitude_percentile,
+            &mut self.scratch,
+            self.amplitude.view_mut(),
+        );
+        clock.lap(&mut t.preprocess);
+        scale
+    }
+
+    /// Steps 2–4 of a `Full` frame on the preprocessed planes: rough flow, `D_rgb`, the robust
+    /// fit of `W_rough`, then the direct fit started from it (when configured and the network
+    /// fit succeeded). Leaves `W_rough` and `D_rgb` in their buffers.
+    fn network_fit(
+        &mut self,
+        input: ChainInput<'_>,
+        t: &mut StageTimings,
+        clock: &mut Stopwatch,
+    ) -> Result<NetworkFit, ChainError> {
+        // 2. Rough flow.
+        let [r, g, b] = &self.rgb;
+        self.runner.flow(
+            [r.view(), g.view(), b.view()],
+            self.amplitude.view(),
+            &mut self.flow_rough,
+        )?;
+        clock.lap(&mut t.flow);
+        // 3.–4. D_rgb and the robust least squares.
+        warp_depth(input.depth, &self.flow_rough, self.depth_rgb.view_mut());
+        let fit = Measurement::from_flow(
+            &self.flow_rough,
+            self.depth_rgb.view(),
+            self.options.robust,
+            self.options.inlier_threshold_px,
+        );
+        // The direct fit to the frame's edges, started from the network's calibration.
+        let direct = match (&self.options.direct_fit, &fit) {
+            (Some(params), Ok(network)) => {
+                Some(Measurement::from_direct_fit(&estimate_calibration_direct(
+                    input.rgb,
+                    input.amplitude,
+                    input.depth,
+                    network.calibration,
+                    params,
+                )))
+            }
+            _ => None,
+        };
+        Ok(NetworkFit { fit, direct })
+    }
+
     /// Aligns the frame by a calibration (`Cached` frames, and `Full` frames whose direct fit
     /// succeeded): `D_rgb` by the forward splat, `W_convt` that calibration's flow at `D_rgb`,
     /// the fusion network as [`ChainOptions::cached_fusion`] says, then the warp of the
@@ -517,22 +569,17 @@ impl DearChain {
         output: &ChainOutput<'_>,
     ) -> Result<(), ChainError> {
         let (h, w) = self.dim();
-        let check = |what: &'static str, found: &[usize], expected: &[usize]| {
-            if found == expected {
-                Ok(())
-            } else {
-                Err(ChainError::Shape {
-                    what,
-                    expected: expected.to_vec(),
-                    found: found.to_vec(),
-                })
-            }
-        };
-        check("rgb", input.rgb.shape(), &[h, w, 3])?;
-        check("amplitude", input.amplitude.shape(), &[h, w])?;
-        check("depth", input.depth.shape(), &[h, w])?;
+        let check = shape_check;
+        self.check_input_shapes(input)?;
         check("output depth", output.depth.shape(), &[h, w])?;
         check("output confidence", output.confidence.shape(), &[h, w])
+    }
+
+    fn check_input_shapes(&self, input: &ChainInput<'_>) -> Result<(), ChainError> {
+        let (h, w) = self.dim();
+        shape_check("rgb", input.rgb.shape(), &[h, w, 3])?;
+        shape_check("amplitude", input.amplitude.shape(), &[h, w])?;
+        shape_check("depth", input.depth.shape(), &[h, w])
     }
 
     /// RGB planes in `[0, 1]` of the last frame.
@@ -572,6 +619,39 @@ impl DearChain {
     pub fn refined_raw(&self) -> &Array2<f32> {
         &self.refined
     }
+}
+
+/// `Ok` when `found` is `expected`, else the [`ChainError::Shape`] naming `what`.
+fn shape_check(what: &'static str, found: &[usize], expected: &[usize]) -> Result<(), ChainError> {
+    if found == expected {
+        Ok(())
+    } else {
+        Err(ChainError::Shape {
+            what,
+            expected: expected.to_vec(),
+            found: found.to_vec(),
+        })
+    }
+}
+
+/// The two fits of a `Full` frame.
+struct NetworkFit {
+    /// The robust fit of `W_rough` against `D_rgb`.
+    fit: Result<Measurement, LsqError>,
+    /// `Some` when the direct fit ran: its measurement, `None` inside when it fell back.
+    direct: Option<Option<Measurement>>,
+}
+
+/// What [`DearChain::measure`] found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasureReport {
+    /// The direct fit when it ran and was confident, otherwise the robust fit of `W_rough`
+    /// (or why it failed).
+    pub measurement: Result<Measurement, LsqError>,
+    /// Whether the direct fit ran.
+    pub ran_direct_fit: bool,
+    /// Preprocess, flow (rough-flow network) and calibrate (the fits).
+    pub timings: StageTimings,
 }
 
 /// Wall-clock laps for [`StageTimings`].

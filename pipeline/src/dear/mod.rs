@@ -4,13 +4,17 @@
 //!
 //! - [`preprocess`]: amplitude and RGB normalisation as the bundle defines it;
 //! - [`chain`]: [`DearChain`], `Full` (the paper) and `Cached(calibration)` modes;
+//! - [`background`]: [`BackgroundCalibrator`], a `Full` frame's calibration measurement on a
+//!   worker thread, so network frames do not stall the frame path;
 //! - [`confidence`]: the published per-pixel confidence and its definition.
 
+pub mod background;
 pub mod chain;
 pub mod confidence;
 pub mod preprocess;
 
+pub use background::{BackgroundCalibrator, Delivered, Submit};
 pub use chain::{
     CachedFusion, ChainError, ChainInput, ChainMode, ChainOptions, ChainOutput, ChainReport,
-    DearChain, StageTimings,
+    DearChain, MeasureReport, StageTimings,
 };

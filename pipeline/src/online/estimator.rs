@@ -29,6 +29,16 @@
 //!    Without this the estimate would lag OIS-like wander of the principal point (pixels per
 //!    second) by about `interval_frames · window / 2` frames.
 //!
+//! **Network frames in the background** ([`crate::dear::BackgroundCalibrator`]): when the
+//! network runs on a worker instead of inline, the caller answers a frame that asks for it with
+//! [`OnlineCalibrator::defer_network`] (the worker took the frame; it is processed as an
+//! ordinary frame meanwhile, and tracked) or [`OnlineCalibrator::network_busy`] (the worker is
+//! still on an earlier frame; asked again next frame), and hands the result over with
+//! [`OnlineCalibrator::deliver`] whenever it is ready. A late measurement observed `c` as it
+//! was on its own frame, so the tracking applied since then is added to it before filtering,
+//! exactly as it was added to the stored measurements. The residual baseline is taken on the
+//! first frame after an accepted delivery, the first one aligned by the new estimate.
+//!
 //! The network runs when there is no established estimate yet, every `interval_frames`, sooner
 //! (`retry_frames`) after a rejected measurement, and when the alignment residual has exceeded
 //! the value measured on the last network frame by `residual_trigger_ratio` for
@@ -131,6 +141,16 @@ pub struct FrameDecision {
     pub calibration: Option<Calibration>,
 }
 
+/// A network frame handed to a background worker ([`OnlineCalibrator::defer_network`]):
+/// which frame it was and how far tracking had moved `c` by then.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NetworkTicket {
+    /// The frame number ([`OnlineCalibrator::frames`]) the measurement is of.
+    pub frame: u64,
+    /// [`OnlineCalibrator`]'s cumulative tracking correction of `c` at that frame.
+    tracked: (f32, f32),
+}
+
 /// What became of a measurement.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Outcome {
@@ -181,6 +201,10 @@ pub struct OnlineCalibrator {
     residual_high_frames: u32,
     residual_triggered: bool,
     this_frame_network: bool,
+    /// Sum of every tracking step applied to `c` so far (`u`, `v`), for late measurements.
+    tracked: (f32, f32),
+    /// A delivered measurement was accepted: take the next frame's residual as the baseline.
+    baseline_due: bool,
 }
 
 impl OnlineCalibrator {
@@ -208,6 +232,8 @@ impl OnlineCalibrator {
             residual_high_frames: 0,
             residual_triggered: false,
             this_frame_network: false,
+            tracked: (0.0, 0.0),
+            baseline_due: false,
         }
     }
 
@@ -252,6 +278,12 @@ impl OnlineCalibrator {
         if !self.this_frame_network {
             self.track(alignment);
         }
+        if self.baseline_due && !self.this_frame_network {
+            if let Some(r) = residual.filter(|r| r.is_finite()) {
+                self.residual_baseline = Some(r);
+                self.baseline_due = false;
+            }
+        }
         if self.this_frame_network {
             self.last_network_frame = Some(self.frame);
             self.residual_triggered = false;
@@ -274,6 +306,64 @@ impl OnlineCalibrator {
         }
         self.this_frame_network = false;
         outcome
+    }
+
+    /// The frame that [`begin_frame`](Self::begin_frame) asked the network for was handed to
+    /// a background worker: it is processed and ended like a frame without the network
+    /// (tracked, its residual watched), while the interval and the residual trigger restart
+    /// from it as from a network frame. Returns the ticket to [`deliver`](Self::deliver) the
+    /// result with.
+    pub fn defer_network(&mut self) -> NetworkTicket {
+        self.this_frame_network = false;
+        self.last_network_frame = Some(self.frame);
+        self.residual_triggered = false;
+        self.residual_high_frames = 0;
+        NetworkTicket {
+            frame: self.frame,
+            tracked: self.tracked,
+        }
+    }
+
+    /// The network was asked for on this frame but the background worker is still busy: the
+    /// frame is an ordinary one, and the next frame asks again.
+    pub fn network_busy(&mut self) {
+        self.this_frame_network = false;
+    }
+
+    /// A background measurement of the frame `ticket` names, delivered between frames (before
+    /// [`begin_frame`](Self::begin_frame)). The tracking steps applied since that frame are
+    /// added to its `c` first, then it is filtered like an inline one. Returns what became of
+    /// it.
+    pub fn deliver(
+        &mut self,
+        ticket: NetworkTicket,
+        measurement: Result<Measurement, LsqError>,
+    ) -> Outcome {
+        let (du, dv) = (
+            self.tracked.0 - ticket.tracked.0,
+            self.tracked.1 - ticket.tracked.1,
+        );
+        let measurement = measurement.map(|mut m| {
+            m.calibration.cx += du;
+            m.calibration.cy += dv;
+            m
+        });
+        let outcome = self.observe(measurement);
+        if matches!(outcome, Outcome::Accepted | Outcome::Jump) {
+            self.baseline_due = true;
+        }
+        outcome
+    }
+
+    /// A background measurement that could not be made at all (the network failed on its
+    /// frame): counted as a rejected attempt, so the network is retried after
+    /// `retry_frames` and the quality's acceptance drops.
+    pub fn deliver_failure(&mut self) {
+        self.last_rejected = true;
+        self.attempts.push_back(false);
+        while self.attempts.len() > self.config.window {
+            self.attempts.pop_front();
+        }
     }
 
     /// Moves `c` (estimate, accepted and held-back measurements) by the edge shift.
@@ -303,6 +393,8 @@ impl OnlineCalibrator {
         }
         estimate.cx += du;
         estimate.cy += dv;
+        self.tracked.0 += du;
+        self.tracked.1 += dv;
         for m in self.accepted.iter_mut().chain(self.pending.iter_mut()) {
             m.calibration.cx += du;
             m.calibration.cy += dv;
@@ -877,6 +969,73 @@ mod tests {
         off.begin_frame();
         off.end_frame(None, shifted(1.0, 1.0, 0.5));
         assert_eq!(off.estimate(), Some(TRUE));
+    }
+
+    /// The background protocol: a network frame handed to a worker is processed (and tracked)
+    /// like any other, the interval restarts from it, the result arrives frames later with the
+    /// tracking applied since its frame, and a busy worker means "ask again next frame".
+    #[test]
+    fn a_late_measurement_gets_the_tracking_applied_since_its_frame() {
+        let config = OnlineConfig {
+            interval_frames: 5,
+            ..OnlineConfig::default()
+        };
+        let mut est = warmed_up(config);
+        // Frames until the interval asks for the network; they are tracked: c moves 0.5 px.
+        let mut asked = None;
+        for _ in 0..10 {
+            let d = est.begin_frame();
+            if d.run_network.is_some() {
+                asked = Some(est.defer_network());
+                // Handed to the worker: an ordinary frame, tracked like the others.
+                est.end_frame(None, shifted(0.5 / 0.7, 0.0, 0.5));
+                break;
+            }
+            est.end_frame(None, None);
+        }
+        let ticket = asked.expect("the interval asks for the network");
+        assert!((est.estimate().unwrap().cx - (TRUE.cx + 0.5)).abs() < 1e-5);
+        // While the worker is busy the next frames ask again (interval restarted at the
+        // ticket's frame: they do not), and they keep being tracked.
+        for _ in 0..3 {
+            let d = est.begin_frame();
+            assert_eq!(
+                d.run_network, None,
+                "the interval restarts at the deferred frame"
+            );
+            est.end_frame(None, shifted(0.5 / 0.7, 0.0, 0.5));
+        }
+        let truth_now = TRUE.cx + 2.0;
+        assert!((est.estimate().unwrap().cx - truth_now).abs() < 1e-4);
+        // The measurement of the ticket's frame saw c as it was then, before that frame's own
+        // tracking step: TRUE. Delivered now, it is moved by the 2 px tracked since and agrees
+        // with the tracked estimate instead of dragging it back.
+        let outcome = est.deliver(ticket, Ok(good(TRUE)));
+        assert_eq!(outcome, Outcome::Accepted);
+        assert!(
+            (est.estimate().unwrap().cx - truth_now).abs() < 1e-4,
+            "{:?}",
+            est.estimate()
+        );
+        // A busy worker: the frame is an ordinary one and the next frame asks again.
+        let mut busy_est = warmed_up(config);
+        let mut asked_frames = 0;
+        for _ in 0..20 {
+            if busy_est.begin_frame().run_network.is_some() {
+                asked_frames += 1;
+                busy_est.network_busy();
+            }
+            busy_est.end_frame(None, None);
+        }
+        assert_eq!(
+            asked_frames,
+            20 - 4,
+            "asked on every frame from the interval on"
+        );
+        // A failed background frame counts as a rejected attempt: retried, quality lower.
+        let before = busy_est.quality();
+        busy_est.deliver_failure();
+        assert!(busy_est.quality() < before);
     }
 
     #[test]

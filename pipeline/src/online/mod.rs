@@ -16,6 +16,8 @@ pub mod estimator;
 pub mod measurement;
 pub mod residual;
 
-pub use estimator::{FrameDecision, OnlineCalibrator, OnlineConfig, Outcome, Rejection, Trigger};
+pub use estimator::{
+    FrameDecision, NetworkTicket, OnlineCalibrator, OnlineConfig, Outcome, Rejection, Trigger,
+};
 pub use measurement::{Evidence, Measurement};
 pub use residual::{EdgeAlignment, EdgeCheck, EdgeShift};

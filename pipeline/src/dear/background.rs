@@ -1,0 +1,257 @@
+//! Network frames off the frame path: the calibration measurement of a `Full` frame (rough
+//! flow, least squares, direct fit — [`DearChain::measure`]) on a worker thread of its own.
+//!
+//! At 640×480 that measurement takes 0.5–0.9 s on one core of the development machine, twenty
+//! frames of a 30 fps camera. Run inline, every network frame stalls the stream and the queue
+//! drops what arrives meanwhile. With this worker the frame path never waits: the frame that
+//! asked for the network is copied (three planes, about 3.4 MB at VGA, into buffers reused
+//! frame after frame) and processed like any other with the current estimate; the measurement
+//! is delivered to the online estimator on the first frame after it is ready, and the frames
+//! after that use the updated estimate.
+//!
+//! The worker runs at a lower scheduling priority (nice +10) than the thread that calls it, so
+//! on a two-core board it takes what the frame path leaves instead of competing with it.
+//!
+//! One measurement is in flight at a time: while the worker is busy a new request is answered
+//! [`Submit::Busy`] and the caller simply asks again on a later frame.
+
+use std::sync::mpsc::{self, Receiver, SyncSender, TryRecvError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use ndarray::{Array2, Array3};
+
+use crate::dear::chain::{ChainError, ChainInput, DearChain, MeasureReport};
+
+/// The worker's nice value relative to the caller (Linux: nice is per thread).
+const WORKER_NICE: i32 = 10;
+
+/// Owned copies of one frame's sensor planes, reused between jobs.
+#[derive(Debug)]
+struct Planes {
+    rgb: Array3<u8>,
+    amplitude: Array2<f32>,
+    depth: Array2<f32>,
+}
+
+struct Job<T> {
+    ticket: T,
+    planes: Planes,
+}
+
+struct Done<T> {
+    ticket: T,
+    report: Result<MeasureReport, ChainError>,
+    elapsed: Duration,
+    planes: Planes,
+}
+
+/// A finished measurement.
+#[derive(Debug)]
+pub struct Delivered<T> {
+    /// What the caller attached to the frame when it submitted it.
+    pub ticket: T,
+    /// The measurement, or why the chain could not run on that frame.
+    pub report: Result<MeasureReport, ChainError>,
+    /// Wall time the worker spent on it.
+    pub elapsed: Duration,
+}
+
+/// What became of a submission.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Submit {
+    /// The frame was copied and the worker started on it.
+    Started,
+    /// A measurement is still running; ask again on a later frame.
+    Busy,
+    /// The worker thread is gone (it panicked); no measurement will come.
+    Stopped,
+}
+
+/// A worker thread that owns a [`DearChain`] and measures the calibration of the frames it is
+/// given (see the module docs).
+pub struct BackgroundCalibrator<T: Send + 'static> {
+    jobs: Option<SyncSender<Job<T>>>,
+    results: Receiver<Done<T>>,
+    /// The frame buffers when no job holds them.
+    spare: Option<Planes>,
+    busy: bool,
+    stopped: bool,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl<T: Send + 'static> std::fmt::Debug for BackgroundCalibrator<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BackgroundCalibrator")
+            .field("busy", &self.busy)
+            .field("stopped", &self.stopped)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<T: Send + 'static> BackgroundCalibrator<T> {
+    /// Starts the worker with `chain` (built by the caller, so a bundle problem is the
+    /// caller's start-up error). `name` names the thread.
+    ///
+    /// # Errors
+    /// When the thread cannot be spawned.
+    pub fn spawn(mut chain: DearChain, name: &str) -> std::io::Result<Self> {
+        let (h, w) = chain.dim();
+        let (job_tx, job_rx) = mpsc::sync_channel::<Job<T>>(1);
+        let (done_tx, done_rx) = mpsc::sync_channel::<Done<T>>(1);
+        let thread = std::thread::Builder::new()
+            .name(name.to_owned())
+            .spawn(move || {
+                lower_priority();
+                while let Ok(Job { ticket, planes }) = job_rx.recv() {
+                    let start = Instant::now();
+                    let report = chain.measure(ChainInput {
+                        rgb: planes.rgb.view(),
+                        amplitude: planes.amplitude.view(),
+                        depth: planes.depth.view(),
+                    });
+                    let done = Done {
+                        ticket,
+                        report,
+                        elapsed: start.elapsed(),
+                        planes,
+                    };
+                    if done_tx.send(done).is_err() {
+                        break;
+                    }
+                }
+            })?;
+        Ok(BackgroundCalibrator {
+            jobs: Some(job_tx),
+            results: done_rx,
+            spare: Some(Planes {
+                rgb: Array3::zeros((h, w, 3)),
+                amplitude: Array2::zeros((h, w)),
+                depth: Array2::zeros((h, w)),
+            }),
+            busy: false,
+            stopped: false,
+            thread: Some(thread),
+        })
+    }
+
+    /// Copies the frame and starts measuring it, unless a measurement is still running.
+    ///
+    /// # Errors
+    /// [`ChainError::Shape`] when a plane does not have the stream's shape (nothing started).
+    pub fn try_submit(&mut self, input: ChainInput<'_>, ticket: T) -> Result<Submit, ChainError> {
+        if self.stopped {
+            return Ok(Submit::Stopped);
+        }
+        let Some(mut planes) = self.spare.take() else {
+            return Ok(Submit::Busy);
+        };
+        let (h, w) = planes.depth.dim();
+        let checks: [(&'static str, &[usize], [usize; 3], usize); 3] = [
+            ("rgb", input.rgb.shape(), [h, w, 3], 3),
+            ("amplitude", input.amplitude.shape(), [h, w, 0], 2),
+            ("depth", input.depth.shape(), [h, w, 0], 2),
+        ];
+        for (what, found, expected, rank) in checks {
+            if found != &expected[..rank] {
+                self.spare = Some(planes);
+                return Err(ChainError::Shape {
+                    what,
+                    expected: expected[..rank].to_vec(),
+                    found: found.to_vec(),
+                });
+            }
+        }
+        planes.rgb.assign(&input.rgb);
+        planes.amplitude.assign(&input.amplitude);
+        planes.depth.assign(&input.depth);
+        let sent = self
+            .jobs
+            .as_ref()
+            .is_some_and(|jobs| jobs.send(Job { ticket, planes }).is_ok());
+        if sent {
+            self.busy = true;
+            Ok(Submit::Started)
+        } else {
+            // The receiving end is gone: the worker panicked. The planes went with the job.
+            self.stopped = true;
+            Ok(Submit::Stopped)
+        }
+    }
+
+    /// The finished measurement, if one is ready; never waits.
+    pub fn poll(&mut self) -> Option<Delivered<T>> {
+        match self.results.try_recv() {
+            Ok(done) => Some(self.take(done)),
+            Err(TryRecvError::Empty) => None,
+            Err(TryRecvError::Disconnected) => {
+                self.stopped = true;
+                self.busy = false;
+                None
+            }
+        }
+    }
+
+    /// Waits for the measurement in flight (tests and shutdown); `None` when none is running
+    /// or the worker stopped.
+    pub fn wait(&mut self) -> Option<Delivered<T>> {
+        if !self.busy {
+            return None;
+        }
+        match self.results.recv() {
+            Ok(done) => Some(self.take(done)),
+            Err(_) => {
+                self.stopped = true;
+                self.busy = false;
+                None
+            }
+        }
+    }
+
+    fn take(&mut self, done: Done<T>) -> Delivered<T> {
+        self.busy = false;
+        self.spare = Some(done.planes);
+        Delivered {
+            ticket: done.ticket,
+            report: done.report,
+            elapsed: done.elapsed,
+        }
+    }
+
+    /// Whether a measurement is running.
+    pub fn is_busy(&self) -> bool {
+        self.busy
+    }
+
+    /// Whether the worker thread is gone (it panicked): no further measurement will come.
+    pub fn is_stopped(&self) -> bool {
+        self.stopped
+    }
+}
+
+impl<T: Send + 'static> Drop for BackgroundCalibrator<T> {
+    fn drop(&mut self) {
+        // Closing the job channel ends the worker's loop after the job in flight.
+        self.jobs = None;
+        // Drain so a worker blocked on sending its result can finish.
+        while self.results.recv().is_ok() {}
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+/// Lowers the calling thread's scheduling priority by [`WORKER_NICE`] (Linux: the nice value
+/// is per thread). Best effort: a failure leaves the worker at the caller's priority.
+fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: getpriority/setpriority take plain integers; `who = 0` names the calling thread.
+    unsafe {
+        *libc::__errno_location() = 0;
+        let current = libc::getpriority(libc::PRIO_PROCESS, 0);
+        if current == -1 && *libc::__errno_location() != 0 {
+            return;
+        }
+        let _ = libc::setpriority(libc::PRIO_PROCESS, 0, (current + WORKER_NICE).min(19));
+    }
+}
