@@ -64,6 +64,32 @@ fn taps(n_out: usize, n_in: usize, stride: usize) -> Vec<Tap> {
         .collect()
 }
 
+/// One row upsampled `stride`× along x exactly as [`taps`] defines it (half-pixel centres,
+/// clamped): `low[0]` left of the first centre, then a run of `stride` outputs between each
+/// pair of neighbouring samples with the fixed fractions `(p + ½)/stride`, then the last
+/// sample. Written as runs instead of per-pixel gathers through `taps`, which cost more than
+/// the kernel arithmetic; the fractions are exact in `f32` for the power-of-two strides a
+/// manifest allows, so the result is bit-identical to the tap form.
+fn upsample_row(low: &[f32], stride: usize, out: &mut [f32]) {
+    let (n, w) = (low.len(), out.len());
+    let lead = (stride / 2).min(w);
+    out[..lead].fill(low[0]);
+    let mut x = lead;
+    for pair in low.windows(2) {
+        if x >= w {
+            break;
+        }
+        let (a, d) = (pair[0], pair[1] - pair[0]);
+        let end = (x + stride).min(w);
+        for (p, o) in out[x..end].iter_mut().enumerate() {
+            let f = (p as f32 + 0.5) / stride as f32;
+            *o = a + f * d;
+        }
+        x = end;
+    }
+    out[x..].fill(low[n - 1]);
+}
+
 /// `e^x` to about 10⁻⁶ relative error for `x` in `[−87, 88]` (clamped outside): range
 /// reduction to `2^n · e^g`, `|g| ≤ ln2/2`, and a degree-6 Taylor polynomial.
 #[inline(always)]
@@ -126,7 +152,6 @@ pub fn apply_gated(
         "maps {h4}x{w4} at stride {} do not cover {h}x{w}",
         k.stride
     );
-    let xs = taps(w, w4, k.stride);
     let ys = taps(h, h4, k.stride);
     let inv_depth = 1.0 / k.max_depth_m;
     let depth = depth.as_standard_layout();
@@ -140,17 +165,7 @@ pub fn apply_gated(
                 let out_row = out_row
                     .as_slice_mut()
                     .expect("rows of a standard-layout output are contiguous");
-                gated_row(
-                    sc,
-                    maps,
-                    depth,
-                    (h, w),
-                    y,
-                    (&xs, ys[y]),
-                    inv_depth,
-                    k,
-                    out_row,
-                );
+                gated_row(sc, maps, depth, (h, w), y, ys[y], inv_depth, k, out_row);
             },
         );
 }
@@ -188,7 +203,6 @@ pub fn blend_classical(
         "maps {h4}x{w4} at stride {} do not cover {h}x{w}",
         k.stride
     );
-    let xs = taps(w, w4, k.stride);
     let ys = taps(h, h4, k.stride);
     base.axis_iter_mut(Axis(0))
         .into_par_iter()
@@ -196,18 +210,20 @@ pub fn blend_classical(
         .zip(classical.axis_iter(Axis(0)))
         .enumerate()
         .for_each_init(
-            || vec![0.0f32; w4],
-            |low, (y, ((mut out, d_row), c_row))| {
+            || (vec![0.0f32; w4], vec![0.0f32; w]),
+            |(low, full), (y, ((mut out, d_row), c_row))| {
                 let (y0, y1, fy) = ys[y];
                 let (r0, r1) = (trust_map.row(y0 as usize), trust_map.row(y1 as usize));
                 for ((l, a), b) in low.iter_mut().zip(r0.iter()).zip(r1.iter()) {
                     *l = a + fy * (b - a);
                 }
-                for (((o, &d), &c), &(x0, x1, fx)) in
-                    out.iter_mut().zip(d_row.iter()).zip(c_row.iter()).zip(&xs)
+                upsample_row(low, k.stride, full);
+                for (((o, &d), &c), &logit) in out
+                    .iter_mut()
+                    .zip(d_row.iter())
+                    .zip(c_row.iter())
+                    .zip(full.iter())
                 {
-                    let a = low[x0 as usize];
-                    let logit = a + fx * (low[x1 as usize] - a);
                     let d_ok = d > 0.0 && d.is_finite();
                     let c_ok = c > 0.0 && c.is_finite();
                     *o = match (d_ok, c_ok) {
@@ -264,13 +280,14 @@ impl RowScratch {
 /// One output row, written as loops over the row's pixels (structure of arrays) so that the
 /// compiler vectorises them; `exp_fast` is branch-free for the same reason.
 #[allow(clippy::too_many_arguments)]
+#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
 fn gated_row(
     sc: &mut RowScratch,
     maps: &[Array2<f32>],
     depth: &[f32],
     (h, w): (usize, usize),
     y: usize,
-    (xs, (y0, y1, fy)): (&[Tap], Tap),
+    (y0, y1, fy): Tap,
     inv_depth: f32,
     k: &GatedKernel,
     out: &mut [f32],
@@ -281,10 +298,7 @@ fn gated_row(
         for ((d, a), b) in sc.low.iter_mut().zip(r0.iter()).zip(r1.iter()) {
             *d = a + fy * (b - a);
         }
-        for (d, &(x0, x1, fx)) in sc.full[c * w..(c + 1) * w].iter_mut().zip(xs) {
-            let a = sc.low[x0 as usize];
-            *d = a + fx * (sc.low[x1 as usize] - a);
-        }
+        upsample_row(&sc.low, k.stride, &mut sc.full[c * w..(c + 1) * w]);
     }
     // Normalised depth rows y−1, y, y+1 with one replicated column on each side.
     for (j, r) in [y.saturating_sub(1), y, (y + 1).min(h - 1)]
@@ -315,7 +329,11 @@ fn gated_row(
             // Invalid neighbours (depth 0) get no weight at all.
             let a = if v > 0.0 { a } else { f32::NEG_INFINITY };
             args[x] = a;
-            sc.amax[x] = sc.amax[x].max(a);
+            // A compare, not f32::max: it vectorises (max's NaN rule does not). A NaN logit
+            // still reaches the result through exp and is caught there.
+            if a > sc.amax[x] {
+                sc.amax[x] = a;
+            }
         }
     }
     sc.sum_e.fill(0.0);
@@ -392,6 +410,29 @@ mod tests {
         assert!((t[2].2 - 0.125).abs() < 1e-6);
         // Past the last centre: clamped to the last input.
         assert_eq!((t[7].0, t[7].1), (1, 1));
+    }
+
+    #[test]
+    fn row_upsampling_is_the_tap_form_bit_for_bit() {
+        for stride in [2usize, 4, 8] {
+            for n_in in [1usize, 2, 3, 7, 40] {
+                // Outputs up to the padded width and a cropped one.
+                for w in [n_in * stride, (n_in * stride).saturating_sub(3).max(1)] {
+                    let low: Vec<f32> = (0..n_in).map(|i| (i as f32 * 0.37).sin() * 3.0).collect();
+                    let mut fast = vec![f32::NAN; w];
+                    upsample_row(&low, stride, &mut fast);
+                    for (x, &(x0, x1, fx)) in taps(w, n_in, stride).iter().enumerate() {
+                        let a = low[x0 as usize];
+                        let want = a + fx * (low[x1 as usize] - a);
+                        assert_eq!(
+                            fast[x].to_bits(),
+                            want.to_bits(),
+                            "stride {stride}, {n_in} -> {w}, x {x}"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     #[test]

@@ -262,6 +262,10 @@ struct GraphRunner {
     /// The output is at 1/`out_stride` of the padded input and returned whole (not cropped).
     out_stride: usize,
     padded: (usize, usize),
+    /// The input tensors of the last run, refilled in place when tract has let go of them: a
+    /// fresh 640×480 tensor per input and frame cost page faults (the kernel zeroing new
+    /// pages) comparable to the small convolutions.
+    input_tensors: Vec<Option<Arc<Tensor>>>,
 }
 
 impl std::fmt::Debug for GraphRunner {
@@ -321,6 +325,7 @@ impl GraphRunner {
             .into_runnable_with_options(options)
             .map_err(onnx_err)?;
         let state = TypedSimpleState::new(&plan).map_err(onnx_err)?;
+        let input_tensors = vec![None; inputs.len()];
         Ok(GraphRunner {
             role: graph.role,
             state,
@@ -328,6 +333,7 @@ impl GraphRunner {
             out_channels,
             out_stride: output.stride,
             padded,
+            input_tensors,
         })
     }
 
@@ -371,7 +377,7 @@ impl GraphRunner {
                 .ok_or_else(|| run_err("no input planes".into()))?
         };
         let mut tensors: TVec<TValue> = TVec::with_capacity(self.inputs.len());
-        for (name, channels) in &self.inputs {
+        for (i, (name, channels)) in self.inputs.iter().enumerate() {
             let planes = provided
                 .iter()
                 .find(|(n, _)| n == name)
@@ -393,10 +399,20 @@ impl GraphRunner {
                     });
                 }
             }
-            tensors.push(
-                self.padded_tensor(planes)
-                    .map_err(|e| run_err(format!("{e:#}")))?,
-            );
+            let slot = &mut self.input_tensors[i];
+            // Reuse last run's tensor when nothing else holds it; otherwise a new one.
+            let reusable = slot.as_mut().and_then(Arc::get_mut);
+            let tensor = match reusable {
+                Some(t) => t,
+                None => {
+                    let (hp, wp) = self.padded;
+                    let fresh = Tensor::zero::<f32>(&[1, planes.len(), hp, wp])
+                        .map_err(|e| run_err(format!("{e:#}")))?;
+                    Arc::get_mut(slot.insert(Arc::new(fresh))).expect("a new Arc is unique")
+                }
+            };
+            fill_padded(self.padded, planes, tensor).map_err(|e| run_err(format!("{e:#}")))?;
+            tensors.push(slot.clone().expect("filled above").into_tvalue());
         }
         let result = self
             .state
@@ -430,29 +446,37 @@ impl GraphRunner {
         }
         Ok(())
     }
+}
 
-    /// A `1 × C × H' × W'` tensor of `planes`, replicating the last row and column into the
-    /// padding.
-    fn padded_tensor(&self, planes: &[ArrayView2<f32>]) -> TractResult<TValue> {
-        let (hp, wp) = self.padded;
-        let mut t = Tensor::zero::<f32>(&[1, planes.len(), hp, wp])?;
-        {
-            let mut view = t.try_as_plain_ram_mut()?;
-            let data = view.as_slice_mut::<f32>()?;
-            for (c, plane) in planes.iter().enumerate() {
-                let (h, w) = plane.dim();
-                let base = c * hp * wp;
-                for y in 0..hp {
-                    let src = plane.row(y.min(h - 1));
-                    let dst = &mut data[base + y * wp..base + (y + 1) * wp];
+/// Writes `planes` into the `1 × C × H' × W'` tensor `t`, replicating the last row and column
+/// into the padding.
+fn fill_padded(
+    (hp, wp): (usize, usize),
+    planes: &[ArrayView2<f32>],
+    t: &mut Tensor,
+) -> TractResult<()> {
+    let mut view = t.try_as_plain_ram_mut()?;
+    let data = view.as_slice_mut::<f32>()?;
+    for (c, plane) in planes.iter().enumerate() {
+        let (h, w) = plane.dim();
+        let base = c * hp * wp;
+        for y in 0..hp {
+            let src = plane.row(y.min(h - 1));
+            let dst = &mut data[base + y * wp..base + (y + 1) * wp];
+            match src.as_slice() {
+                Some(row) => {
+                    dst[..w].copy_from_slice(row);
+                    dst[w..].fill(row[w - 1]);
+                }
+                None => {
                     for (x, d) in dst.iter_mut().enumerate() {
                         *d = src[x.min(w - 1)];
                     }
                 }
             }
         }
-        Ok(t.into_tvalue())
     }
+    Ok(())
 }
 
 /// Input names as `'static` strings for [`BundleError::InputShape`].
