@@ -296,6 +296,68 @@ def table_daemon(benches: list[Path]) -> list[str]:
     return lines
 
 
+#: Work per pixel of each online steady-state stage at 640×480, counted from the code (not
+#: measured): bytes read plus written once each (a pixel's neighbours read again from cache
+#: are not counted) and f32 operations. The refine graph's FLOPs are its 0.1945 GMAC at
+#: 640×480 (models/edge/model.json) × 2 / 307,200 px; its bytes are its six input planes
+#: and its 1/2- and 1/4-resolution activations. An estimate of the order of magnitude: it
+#: says which limit a stage is far from, not a precise fraction.
+STAGE_WORK: dict[str, tuple[str, float, float]] = {
+    "preprocess": ("RGB planes, amplitude normalisation and its percentile", 31, 8),
+    "flow": ("splat (two scatter passes over 4 taps), flow from depth, fallback", 140, 60),
+    "warp": ("depth and amplitude backward warps", 56, 40),
+    "refine": (
+        "classical filter (six stages) + refine graph + Rust tail + confidence + edge check",
+        300,
+        1860,
+    ),
+}
+
+
+def table_limits(bench_path: Path) -> list[str]:
+    """The physical-limit table: each stage's estimated work over its measured time, as a
+    fraction of this machine's measured copy bandwidth and FMA peak (`deard-bench --machine`)."""
+    if not bench_path.is_file():
+        return []
+    bench = json.loads(bench_path.read_text())
+    machine = bench.get("machine")
+    online = next((m for m in bench["modes"] if m["mode"] == "online"), None)
+    if not machine or not online:
+        return []
+    pixels = bench["width"] * bench["height"]
+    medians = dict(online["stage_median_ms"])
+    threads = machine["threads"]
+    lines = [
+        (
+            f"This machine (`deard-bench --machine`): copy bandwidth "
+            f"{machine['bandwidth_gbs_one']:.1f} GB/s on one thread, "
+            f"{machine['bandwidth_gbs_all']:.1f} GB/s on {threads}; f32 FMA "
+            f"{machine['fma_gflops_one']:.1f} GFLOP/s on one thread, "
+            f"{machine['fma_gflops_all']:.1f} GFLOP/s on {threads}. Work per pixel is "
+            "counted from the code (`STAGE_WORK` in `scripts/results.py`), not measured; "
+            "fractions are of the all-thread limits."
+        ),
+        "",
+        (
+            "| Stage (640×480, online steady state) | what | bytes / px | FLOP / px | "
+            "median (ms) | GB/s | GFLOP/s | of bandwidth | of FMA peak |"
+        ),
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for stage, (what, bytes_px, flop_px) in STAGE_WORK.items():
+        ms = medians.get(stage)
+        if not ms:
+            continue
+        gbs = bytes_px * pixels / (ms * 1e-3) / 1e9
+        gflops = flop_px * pixels / (ms * 1e-3) / 1e9
+        lines.append(
+            f"| {stage} | {what} | {bytes_px:.0f} | {flop_px:.0f} | {ms:.1f} | {gbs:.2f} | "
+            f"{gflops:.2f} | {100 * gbs / machine['bandwidth_gbs_all']:.0f} % | "
+            f"{100 * gflops / machine['fma_gflops_all']:.0f} % |"
+        )
+    return lines
+
+
 def alignment_paragraph(sets: dict[int, dict[str, Report]]) -> str:
     parts = []
     for b in bundles(sets[SIGMAS[0]]):
@@ -472,7 +534,8 @@ def main() -> None:
         "",
         (
             "`deard-bench` runs deard's own processing (`Processor`, default configuration, "
-            "mimalloc, tract on one thread) over a capture in order and times every frame; "
+            "mimalloc, tract on one thread, online mode's network frames on the background "
+            "worker) over a capture in order, frames back to back, and times every frame; "
             "640×480: a 60-frame drifting sequence (`dear-synth sequence --seed 5`), 320×240: "
             "the tracking sequence above. Online mode's steady state is the frames between "
             'rough-flow runs; "all frames" includes the network frames. Stage medians are '
@@ -482,6 +545,10 @@ def main() -> None:
         ),
         "",
         *table_daemon([args.eval / "deard-bench-vga.json", args.eval / "deard-bench-qvga.json"]),
+        "",
+        "## Physical limits",
+        "",
+        *table_limits(args.eval / "deard-bench-vga.json"),
         "",
     ]
     if args.commentary.is_file():

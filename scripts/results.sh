@@ -98,7 +98,7 @@ cargo bench --quiet -p dear-pipeline --bench dear_chain -- --warm-up-time 2 \
     --measurement-time 10 > "$out/bench.log"
 .venv/bin/dear-bench-onnx --bundle models/edge --json "$out/onnxruntime.json" > /dev/null
 echo "== the daemon's processing per frame (deard-bench)"
-target/release/deard-bench --capture "$data/vga_sequence" --frames 120 \
+target/release/deard-bench --capture "$data/vga_sequence" --frames 120 --machine \
     --json "$out/deard-bench-vga.json" > /dev/null
 target/release/deard-bench --capture "$data/sequence" --frames 200 \
     --json "$out/deard-bench-qvga.json" > /dev/null

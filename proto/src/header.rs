@@ -19,7 +19,8 @@ pub mod flags {
     pub const REFINED_NETWORK: u32 = 1 << 1;
     /// Depth was refined by the classical edge-aware filter.
     pub const REFINED_CLASSICAL: u32 = 1 << 2;
-    /// The calibration was (re-)estimated on this very frame.
+    /// A new calibration measurement entered the estimate on this frame: the network ran on
+    /// it (inline), or a measurement made in the background was delivered on it.
     pub const CALIBRATION_ESTIMATED: u32 = 1 << 3;
     /// The calibration comes from the online estimator (otherwise: the static calibration).
     pub const CALIBRATION_ONLINE: u32 = 1 << 4;

@@ -13,6 +13,8 @@
 //! target/release/deard-bench --capture /tmp/vga --bundle models/edge
 //! ```
 
+mod machine;
+
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -57,6 +59,10 @@ struct Cli {
     /// than its period is followed at once by the next.
     #[arg(long, default_value_t = 0.0)]
     fps: f64,
+    /// Also measure this machine's memory bandwidth and f32 FMA peak (the physical-limit
+    /// table's denominators; about two seconds).
+    #[arg(long)]
+    machine: bool,
     /// Modes to measure: online, every-frame (repeatable; default both).
     #[arg(long = "mode", value_parser = parse_mode)]
     modes: Vec<CalibrationMode>,
@@ -144,6 +150,8 @@ struct Report {
     online_network: &'static str,
     /// Frames offered per second (0: back to back).
     fps: f64,
+    /// `--machine`: this machine's measured limits.
+    machine: Option<machine::MachineLimits>,
     modes: Vec<ModeReport>,
 }
 
@@ -195,6 +203,14 @@ fn run(cli: &Cli) -> Result<(), String> {
         },
         if cli.fps > 0.0 { format!("frames offered at {} fps", cli.fps) } else { "frames back to back".to_owned() }
     );
+    let limits = cli.machine.then(|| {
+        let m = machine::measure();
+        println!(
+            "machine: copy bandwidth {:.1} GB/s on one thread, {:.1} GB/s on {}; f32 FMA {:.1} GFLOP/s on one thread, {:.1} GFLOP/s on {}",
+            m.bandwidth_gbs_one, m.bandwidth_gbs_all, m.threads, m.fma_gflops_one, m.fma_gflops_all, m.threads
+        );
+        m
+    });
     let mut reports = Vec::new();
     for mode in modes {
         let config = PipelineConfig {
@@ -230,6 +246,7 @@ fn run(cli: &Cli) -> Result<(), String> {
                 NetworkPlacement::Inline => "inline",
             },
             fps: cli.fps,
+            machine: limits,
             modes: reports,
         };
         let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
