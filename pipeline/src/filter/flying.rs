@@ -6,8 +6,9 @@
 //! Requiring "between" keeps thin structures (a wire in front of a wall is nearer than both
 //! sides) and smooth slopes (a tilted plane is within tolerance of its neighbours).
 
-use ndarray::{ArrayView2, ArrayViewMut2, Axis, Zip};
+use ndarray::{ArrayView2, ArrayViewMut2};
 
+use crate::filter::par_rows;
 use crate::geometry::surface::is_valid_depth;
 
 /// Copy `depth` into `out`, writing `0` for invalid pixels and for flying pixels: those that,
@@ -16,12 +17,7 @@ use crate::geometry::surface::is_valid_depth;
 ///
 /// # Panics
 /// If the shapes differ.
-pub fn remove_flying_pixels(
-    depth: ArrayView2<f32>,
-    rel: f32,
-    abs_m: f32,
-    mut out: ArrayViewMut2<f32>,
-) {
+pub fn remove_flying_pixels(depth: ArrayView2<f32>, rel: f32, abs_m: f32, out: ArrayViewMut2<f32>) {
     assert_eq!(
         depth.dim(),
         out.dim(),
@@ -43,29 +39,59 @@ pub fn remove_flying_pixels(
             & is_valid_depth(a)
             & is_valid_depth(b)
     };
-    Zip::indexed(out.axis_iter_mut(Axis(0))).par_for_each(|y, mut row| {
+    // Whether `z` is valid: `is_valid_depth` without short-circuits (`z > 0` and finite).
+    let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
+    par_rows(out, |y, row| {
         let cur = &d[y * w..(y + 1) * w];
-        // Rows above and below; at the image border there is no vertical or diagonal pair.
-        let pair =
-            (y > 0 && y + 1 < h).then(|| (&d[(y - 1) * w..y * w], &d[(y + 1) * w..(y + 2) * w]));
-        for (x, o) in row.iter_mut().enumerate() {
+        // The general test, for the image border (no vertical or diagonal pair in the first
+        // and last rows, no horizontal or diagonal pair in the first and last columns).
+        let general = |x: usize| {
             let z = cur[x];
             if !is_valid_depth(z) {
-                *o = 0.0;
-                continue;
+                return 0.0;
             }
             let tol = (rel * z).max(abs_m);
             let has_lr = x > 0 && x + 1 < w;
             let mut flying = has_lr && mixed(z, tol, cur[x - 1], cur[x + 1]);
-            if let Some((up, down)) = pair {
+            if y > 0 && y + 1 < h {
+                let (up, down) = (&d[(y - 1) * w..y * w], &d[(y + 1) * w..(y + 2) * w]);
                 flying |= mixed(z, tol, up[x], down[x]);
                 if has_lr {
                     flying |= mixed(z, tol, up[x - 1], down[x + 1])
                         | mixed(z, tol, up[x + 1], down[x - 1]);
                 }
             }
-            *o = if flying { 0.0 } else { z };
+            if flying {
+                0.0
+            } else {
+                z
+            }
+        };
+        if y == 0 || y + 1 >= h || w < 3 {
+            for (x, o) in row.iter_mut().enumerate() {
+                *o = general(x);
+            }
+            return;
         }
+        // Interior: every pair exists, and the loop is branch-free (vectorised). The windows
+        // are the left, centre and right neighbours of each interior pixel in the three rows.
+        let (up, down) = (&d[(y - 1) * w..y * w], &d[(y + 1) * w..(y + 2) * w]);
+        let n = w - 2;
+        let (ul, uc, ur) = (&up[..n], &up[1..n + 1], &up[2..]);
+        let (cl, cc, cr) = (&cur[..n], &cur[1..n + 1], &cur[2..]);
+        let (dl, dc, dr) = (&down[..n], &down[1..n + 1], &down[2..]);
+        let o = &mut row[1..n + 1];
+        for i in 0..n {
+            let z = cc[i];
+            let tol = (rel * z).max(abs_m);
+            let flying = mixed(z, tol, cl[i], cr[i])
+                | mixed(z, tol, uc[i], dc[i])
+                | mixed(z, tol, ul[i], dr[i])
+                | mixed(z, tol, ur[i], dl[i]);
+            o[i] = if valid(z) & !flying { z } else { 0.0 };
+        }
+        row[0] = general(0);
+        row[w - 1] = general(w - 1);
     });
 }
 

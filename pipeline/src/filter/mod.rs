@@ -37,6 +37,54 @@ use crate::filter::outlier::reject_outliers;
 use crate::filter::snap::snap_to_surface;
 use crate::geometry::surface::{is_valid_depth, surface_tolerance};
 
+/// Runs `f(y, a_row, b_row)` on every row of `a` and `b` (same number of rows), rows in
+/// parallel, on contiguous row slices so that the stages' inner loops are flat (and
+/// vectorisable). The refiner's own buffers are contiguous; a row of a strided caller's view
+/// goes through a temporary copy.
+pub(crate) fn par_rows2<A, B, F>(mut a: ArrayViewMut2<A>, mut b: ArrayViewMut2<B>, f: F)
+where
+    A: Copy + Send + Sync,
+    B: Copy + Send + Sync,
+    F: Fn(usize, &mut [A], &mut [B]) + Sync + Send,
+{
+    Zip::indexed(a.rows_mut())
+        .and(b.rows_mut())
+        .par_for_each(|y, mut ra, mut rb| {
+            if let (Some(sa), Some(sb)) = (ra.as_slice_mut(), rb.as_slice_mut()) {
+                return f(y, sa, sb);
+            }
+            let (mut ta, mut tb) = (ra.to_vec(), rb.to_vec());
+            f(y, &mut ta, &mut tb);
+            ra.iter_mut().zip(ta).for_each(|(d, s)| *d = s);
+            rb.iter_mut().zip(tb).for_each(|(d, s)| *d = s);
+        });
+}
+
+/// [`par_rows2`] for one output.
+pub(crate) fn par_rows<A, F>(mut a: ArrayViewMut2<A>, f: F)
+where
+    A: Copy + Send + Sync,
+    F: Fn(usize, &mut [A]) + Sync + Send,
+{
+    Zip::indexed(a.rows_mut()).par_for_each(|y, mut ra| {
+        if let Some(sa) = ra.as_slice_mut() {
+            return f(y, sa);
+        }
+        let mut ta = ra.to_vec();
+        f(y, &mut ta);
+        ra.iter_mut().zip(ta).for_each(|(d, s)| *d = s);
+    });
+}
+
+/// `x.round() as u8` for `x` in `[0, 127]` (or NaN: 0), without the call to `roundf` that
+/// `round` is on x86-64's baseline: the fraction `x − trunc(x)` of a non-negative float is
+/// exact, so rounding half away from zero is `trunc + (fraction ≥ 0.5)`.
+#[inline(always)]
+fn round_small(x: f32) -> u8 {
+    let t = x as u8;
+    t + u8::from(x - f32::from(t) >= 0.5)
+}
+
 /// Confidence of a measurement replaced from its neighbours (a flying pixel moved onto a
 /// neighbouring surface, or an outlier replaced by its neighbourhood's median): which side a
 /// mixed pixel belongs to is a guess (the nearest-in-depth side is right about 70 % of the
@@ -155,8 +203,8 @@ impl ClassicalRefiner {
         &mut self,
         depth: ArrayView2<f32>,
         rgb: ArrayView3<u8>,
-        mut out_depth: ArrayViewMut2<f32>,
-        mut out_confidence: ArrayViewMut2<u8>,
+        out_depth: ArrayViewMut2<f32>,
+        out_confidence: ArrayViewMut2<u8>,
     ) {
         let (h, w) = depth.dim();
         assert_eq!(
@@ -223,33 +271,45 @@ impl ClassicalRefiner {
         );
 
         // Measurements replaced from their neighbours rank with the filled pixels.
-        Zip::from(&mut s.fill_confidence)
-            .and(&s.flying_snapped)
-            .and(&s.outlier_replaced)
-            .par_for_each(|fc, &snapped, &replaced| {
-                if (snapped || replaced) && *fc == 0 {
-                    *fc = REPLACED_CONFIDENCE;
-                }
-            });
-        Zip::from(&mut out_depth)
-            .and(&mut out_confidence)
-            .and(&depth)
-            .and(&s.filled)
-            .and(&s.surfaced)
-            .and(&s.fill_confidence)
-            .par_for_each(|o, c, &measured, &d, &z, &fc| {
+        fn slice<T>(a: &Array2<T>) -> &[T] {
+            a.as_slice().expect("scratch arrays are contiguous")
+        }
+        let depth = depth.as_standard_layout();
+        let (measured, filled, surfaced) = (
+            depth
+                .as_slice()
+                .expect("as_standard_layout yields a contiguous array"),
+            slice(&s.filled),
+            slice(&s.surfaced),
+        );
+        let (fill_confidence, flying_snapped, outlier_replaced) = (
+            slice(&s.fill_confidence),
+            slice(&s.flying_snapped),
+            slice(&s.outlier_replaced),
+        );
+        par_rows2(out_depth, out_confidence, |y, out_row, conf_row| {
+            let row = y * w..(y + 1) * w;
+            for (x, (o, c)) in out_row.iter_mut().zip(conf_row.iter_mut()).enumerate() {
+                let i = row.start + x;
+                let (d, z) = (filled[i], surfaced[i]);
                 if !is_valid_depth(d) || !is_valid_depth(z) {
                     (*o, *c) = (0.0, 0);
-                    return;
+                    continue;
                 }
+                let fc = match fill_confidence[i] {
+                    0 if flying_snapped[i] || outlier_replaced[i] => REPLACED_CONFIDENCE,
+                    fc => fc,
+                };
                 *o = z;
                 *c = if fc > 0 {
                     fc
                 } else {
+                    let measured = measured[i];
                     let change = (z - measured).abs() / surface_tolerance(measured);
-                    255 - (127.0 * change.min(1.0)).round() as u8
+                    255 - round_small(127.0 * change.min(1.0))
                 };
-            });
+            }
+        });
     }
 
     /// [`refine_into`](Self::refine_into) into new arrays: `(depth, confidence)`.
@@ -391,6 +451,184 @@ mod tests {
             let on_a_surface = same_surface(1.0, z) || same_surface(3.0, z);
             assert!(on_a_surface, "({y},{x}): {z} floats between the surfaces");
         }
+    }
+
+    /// Noisy depth with edges, holes, NaN and isolated spikes, and a textured guide with a
+    /// colour edge: exercises every branch of every stage.
+    fn awkward_frame(h: usize, w: usize) -> (Array2<f32>, Array3<u8>) {
+        let depth = Array2::from_shape_fn((h, w), |(y, x)| {
+            let i = y * w + x;
+            let level = if x * 3 < w {
+                0.8
+            } else if (x + y) % 40 < 25 {
+                1.6
+            } else {
+                3.5
+            };
+            match i % 23 {
+                0 | 7 => 0.0,
+                11 if y % 3 == 0 => f32::NAN,
+                5 => level * 1.4,
+                13 => 2.2,
+                _ => level * (1.0 + 0.012 * gauss(i)),
+            }
+        });
+        let mut depth = depth;
+        let (hy, hx) = (h / 3..(h / 3 + 9).min(h), w / 2..(w / 2 + 12).min(w));
+        depth.slice_mut(ndarray::s![hy, hx]).fill(0.0);
+        let rgb = Array3::from_shape_fn((h, w, 3), |(y, x, c)| {
+            (if x * 3 < w { 40 } else { 170 } + (x * 7 + y * 13 + c) % 9) as u8
+        });
+        (depth, rgb)
+    }
+
+    /// The stages as they were written before they were vectorised (one pixel at a time, 2-D
+    /// indexing), for the bit-for-bit comparisons below.
+    mod plain {
+        use crate::geometry::surface::{is_valid_depth, same_surface};
+        use ndarray::Array2;
+
+        pub fn flying(d: &Array2<f32>, rel: f32, abs_m: f32) -> Array2<f32> {
+            let (h, w) = d.dim();
+            let mixed = |z: f32, tol: f32, a: f32, b: f32| {
+                let (da, db) = (z - a, b - z);
+                da.abs() > tol
+                    && db.abs() > tol
+                    && da * db > 0.0
+                    && is_valid_depth(a)
+                    && is_valid_depth(b)
+            };
+            Array2::from_shape_fn((h, w), |(y, x)| {
+                let z = d[(y, x)];
+                if !is_valid_depth(z) {
+                    return 0.0;
+                }
+                let tol = (rel * z).max(abs_m);
+                let has_lr = x > 0 && x + 1 < w;
+                let has_ud = y > 0 && y + 1 < h;
+                let flying = (has_lr && mixed(z, tol, d[(y, x - 1)], d[(y, x + 1)]))
+                    || (has_ud && mixed(z, tol, d[(y - 1, x)], d[(y + 1, x)]))
+                    || (has_lr
+                        && has_ud
+                        && (mixed(z, tol, d[(y - 1, x - 1)], d[(y + 1, x + 1)])
+                            || mixed(z, tol, d[(y - 1, x + 1)], d[(y + 1, x - 1)])));
+                if flying {
+                    0.0
+                } else {
+                    z
+                }
+            })
+        }
+
+        pub fn snap(
+            v: &Array2<f32>,
+            r: &Array2<f32>,
+            radius: usize,
+        ) -> (Array2<f32>, Array2<bool>) {
+            let (h, w) = v.dim();
+            let mut out = Array2::zeros((h, w));
+            let mut flags = Array2::from_elem((h, w), false);
+            for ((y, x), &v) in v.indexed_iter() {
+                if !is_valid_depth(v) {
+                    continue;
+                }
+                let mut nearest = (f32::INFINITY, 0.0f32);
+                let mut on_surface = false;
+                for yy in y.saturating_sub(radius)..=(y + radius).min(h - 1) {
+                    for xx in x.saturating_sub(radius)..=(x + radius).min(w - 1) {
+                        let z = r[(yy, xx)];
+                        if !is_valid_depth(z) {
+                            continue;
+                        }
+                        on_surface |= same_surface(z, v);
+                        if (z - v).abs() < nearest.0 {
+                            nearest = ((z - v).abs(), z);
+                        }
+                    }
+                }
+                if on_surface {
+                    out[(y, x)] = v;
+                } else if nearest.0.is_finite() {
+                    (out[(y, x)], flags[(y, x)]) = (nearest.1, true);
+                }
+            }
+            (out, flags)
+        }
+    }
+
+    fn assert_bits_equal(a: &Array2<f32>, b: &Array2<f32>, what: &str) {
+        for ((i, x), y) in a.indexed_iter().zip(b) {
+            assert_eq!(x.to_bits(), y.to_bits(), "{what} at {i:?}: {x} vs {y}");
+        }
+    }
+
+    #[test]
+    fn flying_and_snap_match_the_plain_rules_bit_for_bit() {
+        for (h, w) in [(41, 67), (2, 9), (9, 2), (1, 1)] {
+            let (depth, _) = awkward_frame(h, w);
+            let mut cleaned = Array2::zeros((h, w));
+            flying::remove_flying_pixels(depth.view(), 0.03, 0.01, cleaned.view_mut());
+            assert_bits_equal(&cleaned, &plain::flying(&depth, 0.03, 0.01), "flying");
+            for radius in [1, 2] {
+                let mut out = Array2::zeros((h, w));
+                let mut flags = Array2::from_elem((h, w), false);
+                snap_to_surface(
+                    depth.view(),
+                    cleaned.view(),
+                    radius,
+                    out.view_mut(),
+                    flags.view_mut(),
+                );
+                let (expect, expect_flags) = plain::snap(&depth, &cleaned, radius);
+                assert_bits_equal(&out, &expect, "snap");
+                assert_eq!(flags, expect_flags);
+            }
+        }
+    }
+
+    #[test]
+    fn strided_outputs_get_the_same_result() {
+        // Output views with a column stride go through the stages' row copies.
+        let (h, w) = (35, 50);
+        let (depth, rgb) = awkward_frame(h, w);
+        let mut r = ClassicalRefiner::default();
+        let (out, conf) = r.refine(depth.view(), rgb.view());
+        let mut wide = Array2::<f32>::zeros((h, 2 * w));
+        let mut wide_conf = Array2::<u8>::zeros((h, 2 * w));
+        r.refine_into(
+            depth.view(),
+            rgb.view(),
+            wide.slice_mut(ndarray::s![.., ..;2]),
+            wide_conf.slice_mut(ndarray::s![.., ..;2]),
+        );
+        assert_bits_equal(&wide.slice(ndarray::s![.., ..;2]).to_owned(), &out, "depth");
+        assert_eq!(wide_conf.slice(ndarray::s![.., ..;2]), conf);
+        assert!(conf.iter().any(|&c| c == REPLACED_CONFIDENCE));
+        assert!(conf.iter().any(|&c| (128..255).contains(&c)));
+    }
+
+    #[test]
+    fn round_small_is_round() {
+        // Every float near each half-integer, and a sweep of the rest of [0, 127].
+        for k in 0..=127u32 {
+            let half = k as f32 + 0.5;
+            let mut x = half;
+            for _ in 0..64 {
+                x = f32::from_bits(x.to_bits() - 1);
+            }
+            for _ in 0..128 {
+                if x <= 127.0 {
+                    assert_eq!(round_small(x), x.round() as u8, "{x}");
+                }
+                x = f32::from_bits(x.to_bits() + 1);
+            }
+        }
+        let top = 127.0f32.to_bits();
+        for bits in (0..=top).step_by(9973).chain([top, 0]) {
+            let x = f32::from_bits(bits);
+            assert_eq!(round_small(x), x.round() as u8, "{x}");
+        }
+        assert_eq!(round_small(f32::NAN), f32::NAN.round() as u8);
     }
 
     #[test]

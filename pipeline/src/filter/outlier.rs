@@ -6,13 +6,41 @@
 //! the median of their valid 3 × 3 neighbourhood (more than the same-surface tolerance) are
 //! replaced, so fine structure within the noise level is left to the edge-aware smoother.
 
-use ndarray::{ArrayView2, ArrayViewMut2, Axis, Zip};
+use ndarray::{ArrayView2, ArrayViewMut2};
 
+use crate::filter::par_rows2;
 use crate::geometry::surface::{is_valid_depth, same_surface};
 
 /// Fewest valid pixels (of 9) a neighbourhood needs for its median to overrule the centre:
 /// with fewer, the centre may be a thin structure, not noise.
 const MIN_VALID_NEIGHBOURS: usize = 5;
+
+/// Whether `z` is valid: [`is_valid_depth`] without short-circuits (`z > 0` and finite).
+#[inline(always)]
+fn valid(z: f32) -> bool {
+    (z > 0.0) & (z < f32::INFINITY)
+}
+
+/// Sorts nine values (no NaN) ascending with a 25-comparator sorting network: branch-free,
+/// so a loop over pixels vectorises.
+#[inline(always)]
+fn sort9(v: &mut [f32; 9]) {
+    // Written out (not a loop over a table of pairs) so that it is fully unrolled and the
+    // values stay in registers.
+    macro_rules! sort {
+        ($(($i:literal, $j:literal)),*) => {$({
+            let (a, b) = (v[$i], v[$j]);
+            (v[$i], v[$j]) = (if b < a { b } else { a }, if b < a { a } else { b });
+        })*};
+    }
+    sort!((0, 3), (1, 7), (2, 5), (4, 8));
+    sort!((0, 7), (2, 4), (3, 8), (5, 6));
+    sort!((0, 2), (1, 3), (4, 5), (7, 8));
+    sort!((1, 4), (3, 6), (5, 7));
+    sort!((0, 1), (2, 4), (3, 5), (6, 8));
+    sort!((2, 3), (4, 5), (6, 7));
+    sort!((1, 2), (3, 4), (5, 6));
+}
 
 /// Median of a small slice (sorted in place); the lower middle for an even count.
 fn median(values: &mut [f32]) -> f32 {
@@ -38,8 +66,8 @@ fn median(values: &mut [f32]) -> f32 {
 /// If the shapes differ.
 pub fn reject_outliers(
     depth: ArrayView2<f32>,
-    mut out: ArrayViewMut2<f32>,
-    mut replaced: ArrayViewMut2<bool>,
+    out: ArrayViewMut2<f32>,
+    replaced: ArrayViewMut2<bool>,
 ) {
     let (h, w) = depth.dim();
     assert_eq!(out.dim(), (h, w), "reject_outliers: output shape differs");
@@ -52,36 +80,89 @@ pub fn reject_outliers(
     let z = depth
         .as_slice()
         .expect("as_standard_layout yields a contiguous array");
-    Zip::indexed(out.axis_iter_mut(Axis(0)))
-        .and(replaced.axis_iter_mut(Axis(0)))
-        .par_for_each(|y, mut out_row, mut flag_row| {
-            let (y0, y1) = (y.saturating_sub(1), (y + 1).min(h - 1));
+    par_rows2(out, replaced, |y, out_row, flag_row| {
+        let (y0, y1) = (y.saturating_sub(1), (y + 1).min(h - 1));
+        // The exact rule for pixel `x`: the median of its valid neighbourhood, by sorting.
+        let exact = |x: usize, o: &mut f32, f: &mut bool| {
+            let centre = z[y * w + x];
+            (*o, *f) = (if is_valid_depth(centre) { centre } else { 0.0 }, false);
+            if !is_valid_depth(centre) {
+                return;
+            }
+            let (x0, x1) = (x.saturating_sub(1), (x + 1).min(w - 1));
             let mut window = [0.0f32; 9];
-            for (x, (o, f)) in out_row.iter_mut().zip(flag_row.iter_mut()).enumerate() {
-                let centre = z[y * w + x];
-                (*o, *f) = (if is_valid_depth(centre) { centre } else { 0.0 }, false);
-                if !is_valid_depth(centre) {
-                    continue;
-                }
-                let (x0, x1) = (x.saturating_sub(1), (x + 1).min(w - 1));
-                let mut n = 0;
-                for yy in y0..=y1 {
-                    for &v in &z[yy * w + x0..=yy * w + x1] {
-                        if is_valid_depth(v) {
-                            window[n] = v;
-                            n += 1;
-                        }
+            let mut n = 0;
+            for yy in y0..=y1 {
+                for &v in &z[yy * w + x0..=yy * w + x1] {
+                    if is_valid_depth(v) {
+                        window[n] = v;
+                        n += 1;
                     }
                 }
-                if n < MIN_VALID_NEIGHBOURS {
-                    continue;
-                }
-                let m = median(&mut window[..n]);
-                if !same_surface(m, centre) {
-                    (*o, *f) = (m, true);
-                }
             }
-        });
+            if n < MIN_VALID_NEIGHBOURS {
+                return;
+            }
+            let m = median(&mut window[..n]);
+            if !same_surface(m, centre) {
+                (*o, *f) = (m, true);
+            }
+        };
+        if y == 0 || y + 1 >= h || w < 3 {
+            for (x, (o, f)) in out_row.iter_mut().zip(flag_row.iter_mut()).enumerate() {
+                exact(x, o, f);
+            }
+            return;
+        }
+        // Interior pixels, branch-free (vectorised over the row): the nine values sorted by a
+        // sorting network with the invalid ones as +∞ (after all valid ones), so the median
+        // of the n valid values, the k-th smallest (k = (n − 1)/2), is `sorted[k]`. The same
+        // value the insertion sort of the valid values gives, so the result is identical.
+        let row = |yy: usize| &z[yy * w..(yy + 1) * w];
+        let (up, cur, down) = (row(y - 1), row(y), row(y + 1));
+        let n = w - 2;
+        let window = [
+            &up[..n],
+            &up[1..n + 1],
+            &up[2..],
+            &cur[..n],
+            &cur[1..n + 1],
+            &cur[2..],
+            &down[..n],
+            &down[1..n + 1],
+            &down[2..],
+        ];
+        let (o_in, f_in) = (&mut out_row[1..n + 1], &mut flag_row[1..n + 1]);
+        for i in 0..n {
+            let mut v = [0.0f32; 9];
+            let mut count = 0u32;
+            for (v, s) in v.iter_mut().zip(window) {
+                let ok = valid(s[i]);
+                count += u32::from(ok);
+                *v = if ok { s[i] } else { f32::INFINITY };
+            }
+            sort9(&mut v);
+            let m = match count {
+                0..=6 => v[2],
+                7..=8 => v[3],
+                _ => v[4],
+            };
+            let centre = window[4][i];
+            let keep = valid(centre);
+            let replace = keep & (count >= MIN_VALID_NEIGHBOURS as u32) & !same_surface(m, centre);
+            o_in[i] = if replace {
+                m
+            } else if keep {
+                centre
+            } else {
+                0.0
+            };
+            f_in[i] = replace;
+        }
+        for x in [0, w - 1] {
+            exact(x, &mut out_row[x], &mut flag_row[x]);
+        }
+    });
 }
 
 #[cfg(test)]
@@ -123,6 +204,73 @@ mod tests {
         let (out, flags) = run(&depth);
         assert_eq!(out, depth);
         assert!(flags.iter().all(|&f| !f));
+    }
+
+    #[test]
+    fn sorting_network_sorts_every_input() {
+        // 0-1 principle: a comparator network that sorts every 0/1 input sorts every input.
+        for bits in 0u32..512 {
+            let mut v: [f32; 9] = std::array::from_fn(|i| ((bits >> i) & 1) as f32);
+            sort9(&mut v);
+            assert!(v.windows(2).all(|p| p[0] <= p[1]), "{bits:09b}: {v:?}");
+        }
+        let mut v = [
+            3.0,
+            f32::INFINITY,
+            1.0,
+            9.0,
+            2.0,
+            f32::INFINITY,
+            5.0,
+            4.0,
+            0.5,
+        ];
+        sort9(&mut v);
+        assert_eq!(v[..7], [0.5, 1.0, 2.0, 3.0, 4.0, 5.0, 9.0]);
+    }
+
+    #[test]
+    fn matches_the_median_rule_on_noisy_depth_with_holes() {
+        // Heavy-tailed noise, holes and a step edge: every pixel as the rule says, computed
+        // independently (gather the valid 3 × 3 values, sort, take the lower middle).
+        let (h, w) = (40, 50);
+        let depth = Array2::from_shape_fn((h, w), |(y, x)| {
+            let i = y * w + x;
+            let g = crate::filter::tests::gauss(i);
+            if i % 7 == 3 || i % 11 == 5 {
+                0.0
+            } else if i % 13 == 0 {
+                f32::NAN
+            } else {
+                (if x < 25 { 1.0 } else { 2.5 }) * (1.0 + 0.02 * g * g * g.signum())
+            }
+        });
+        let (out, flags) = run(&depth);
+        for y in 0..h {
+            for x in 0..w {
+                let c = depth[(y, x)];
+                let mut vals: Vec<f32> = (y.saturating_sub(1)..=(y + 1).min(h - 1))
+                    .flat_map(|yy| {
+                        (x.saturating_sub(1)..=(x + 1).min(w - 1)).map(move |xx| (yy, xx))
+                    })
+                    .map(|p| depth[p])
+                    .filter(|&v| is_valid_depth(v))
+                    .collect();
+                vals.sort_by(f32::total_cmp);
+                let (expect, flag) = if !is_valid_depth(c) {
+                    (0.0, false)
+                } else if vals.len() >= MIN_VALID_NEIGHBOURS
+                    && !same_surface(vals[(vals.len() - 1) / 2], c)
+                {
+                    (vals[(vals.len() - 1) / 2], true)
+                } else {
+                    (c, false)
+                };
+                assert_eq!(out[(y, x)].to_bits(), expect.to_bits(), "({y},{x})");
+                assert_eq!(flags[(y, x)], flag, "({y},{x})");
+            }
+        }
+        assert!(flags.iter().filter(|&&f| f).count() > 20);
     }
 
     #[test]

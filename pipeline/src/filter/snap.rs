@@ -8,8 +8,9 @@
 //! neighbouring surface nearest in depth, and after smoothing, so that averaging across a
 //! depth edge the guide does not show can never create a mid-air depth.
 
-use ndarray::{ArrayView2, ArrayViewMut2, Axis, Zip};
+use ndarray::{ArrayView2, ArrayViewMut2};
 
+use crate::filter::par_rows2;
 use crate::geometry::surface::{is_valid_depth, same_surface};
 
 /// For every pixel with a valid `value`: keeps it when a valid `reference` depth within
@@ -25,8 +26,8 @@ pub fn snap_to_surface(
     value: ArrayView2<f32>,
     reference: ArrayView2<f32>,
     radius: usize,
-    mut out: ArrayViewMut2<f32>,
-    mut snapped: ArrayViewMut2<bool>,
+    out: ArrayViewMut2<f32>,
+    snapped: ArrayViewMut2<bool>,
 ) {
     let (h, w) = value.dim();
     assert_eq!(
@@ -40,49 +41,56 @@ pub fn snap_to_surface(
     let r = reference
         .as_slice()
         .expect("as_standard_layout yields a contiguous array");
-    Zip::indexed(out.axis_iter_mut(Axis(0)))
-        .and(snapped.axis_iter_mut(Axis(0)))
-        .and(value.axis_iter(Axis(0)))
-        .par_for_each(|y, mut out_row, mut flag_row, value_row| {
-            let (y0, y1) = (y.saturating_sub(radius), (y + radius).min(h - 1));
-            for (x, (o, f)) in out_row.iter_mut().zip(flag_row.iter_mut()).enumerate() {
-                let v = value_row[x];
-                *f = false;
-                *o = 0.0;
-                if !is_valid_depth(v) {
-                    continue;
-                }
-                // The common case first: the pixel's own reference is on the value's surface.
-                let own = r[y * w + x];
-                if is_valid_depth(own) && same_surface(own, v) {
-                    *o = v;
-                    continue;
-                }
-                let (x0, x1) = (x.saturating_sub(radius), (x + radius).min(w - 1));
-                let mut nearest = (f32::INFINITY, 0.0f32);
-                let mut on_surface = false;
-                'window: for yy in y0..=y1 {
-                    for &z in &r[yy * w + x0..=yy * w + x1] {
-                        if !is_valid_depth(z) {
-                            continue;
-                        }
-                        if same_surface(z, v) {
-                            on_surface = true;
-                            break 'window;
-                        }
-                        let d = (z - v).abs();
-                        if d < nearest.0 {
-                            nearest = (d, z);
-                        }
+    let value = value.as_standard_layout();
+    let v = value
+        .as_slice()
+        .expect("as_standard_layout yields a contiguous array");
+    // Whether `z` is valid: `is_valid_depth` without short-circuits (`z > 0` and finite).
+    let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
+    par_rows2(out, snapped, |y, out_row, flag_row| {
+        let value_row = &v[y * w..(y + 1) * w];
+        let own_row = &r[y * w..(y + 1) * w];
+        // The common case first, branch-free (vectorised): the pixel's own reference is on
+        // the value's surface. Every other valid value is left at 0 here and searched for
+        // below (a kept value is valid, so never 0).
+        for (((o, f), &v), &own) in out_row
+            .iter_mut()
+            .zip(flag_row.iter_mut())
+            .zip(value_row)
+            .zip(own_row)
+        {
+            let keep = valid(v) & valid(own) & same_surface(own, v);
+            (*o, *f) = (if keep { v } else { 0.0 }, false);
+        }
+        let (y0, y1) = (y.saturating_sub(radius), (y + radius).min(h - 1));
+        for (x, (o, f)) in out_row.iter_mut().zip(flag_row.iter_mut()).enumerate() {
+            let v = value_row[x];
+            if *o != 0.0 || !is_valid_depth(v) {
+                continue;
+            }
+            let (x0, x1) = (x.saturating_sub(radius), (x + radius).min(w - 1));
+            // Without branches on the data (valid and invalid depths mix at random near
+            // holes): whether any valid reference is on the value's surface, and the first
+            // (row-major) of the valid ones nearest to it.
+            let mut nearest = (f32::INFINITY, 0.0f32);
+            let mut on_surface = false;
+            for yy in y0..=y1 {
+                for &z in &r[yy * w + x0..=yy * w + x1] {
+                    let ok = valid(z);
+                    on_surface |= ok & same_surface(z, v);
+                    let d = if ok { (z - v).abs() } else { f32::INFINITY };
+                    if d < nearest.0 {
+                        nearest = (d, z);
                     }
                 }
-                if on_surface {
-                    *o = v;
-                } else if nearest.0.is_finite() {
-                    (*o, *f) = (nearest.1, true);
-                }
             }
-        });
+            if on_surface {
+                *o = v;
+            } else if nearest.0.is_finite() {
+                (*o, *f) = (nearest.1, true);
+            }
+        }
+    });
 }
 
 #[cfg(test)]
