@@ -10,11 +10,11 @@
 //! and the training augmentation use to make the misaligned views. Pixels no surface reaches
 //! (disocclusions, the border the view moved away from) stay invalid (0).
 
-use ndarray::{ArrayView2, ArrayViewMut2, Zip};
+use ndarray::{ArrayView2, ArrayViewMut2};
 
 use crate::calibration::Calibration;
 use crate::frame::Flow;
-use crate::geometry::{flow_from_depth_into, splat_depth_with, SplatScratch};
+use crate::geometry::SplatScratch;
 
 /// Aligns depth with a given calibration; keeps the flow of the last frame for warping other
 /// ToF images (amplitude) the same way.
@@ -22,6 +22,8 @@ use crate::geometry::{flow_from_depth_into, splat_depth_with, SplatScratch};
 pub struct StaticAligner {
     flow: Flow,
     splat: SplatScratch,
+    /// The subsample [`median_valid_depth`] selects in, kept between frames.
+    median: Vec<f32>,
 }
 
 impl StaticAligner {
@@ -30,6 +32,7 @@ impl StaticAligner {
         StaticAligner {
             flow: Flow::zeros(height, width),
             splat: SplatScratch::default(),
+            median: Vec::new(),
         }
     }
 
@@ -51,26 +54,25 @@ impl StaticAligner {
             self.flow.u.dim(),
             "align_into: depth shape differs from the aligner's"
         );
-        splat_depth_with(tof_depth, calib, out.view_mut(), &mut self.splat);
-        flow_from_depth_into(
-            out.view(),
-            calib,
-            self.flow.u.view_mut(),
-            self.flow.v.view_mut(),
-            None,
+        // The splat's landing pass and the fallback depth's selection are independent: run
+        // them side by side. The splat then writes the flow with its output, band by band
+        // (`splat_depth_with` followed by `flow_from_depth_into` and the fallback, fused).
+        let (fallback, ()) = rayon::join(
+            || median_valid_depth(tof_depth, &mut self.median).unwrap_or(1.0),
+            || self.splat.prepare(tof_depth, calib),
         );
-        let fallback = median_valid_depth(tof_depth).unwrap_or(1.0);
-        if let Some((fu, fv)) = calib.flow_at(fallback) {
-            Zip::from(&out)
-                .and(&mut self.flow.u)
-                .and(&mut self.flow.v)
-                .for_each(|&z, u, v| {
-                    if !(z > 0.0 && z.is_finite()) {
-                        *u = fu;
-                        *v = fv;
-                    }
-                });
-        }
+        let flow = (
+            self.flow
+                .u
+                .as_slice_mut()
+                .expect("the aligner's flow is standard layout"),
+            self.flow
+                .v
+                .as_slice_mut()
+                .expect("the aligner's flow is standard layout"),
+            calib.flow_at(fallback),
+        );
+        self.splat.resolve_into(calib, out.view_mut(), Some(flow));
     }
 
     /// The flow used by the last [`align_into`](Self::align_into) (to warp other ToF images
@@ -80,14 +82,15 @@ impl StaticAligner {
     }
 }
 
-/// Median of the valid (positive, finite) depths, on a subsample for speed.
-fn median_valid_depth(depth: ArrayView2<f32>) -> Option<f32> {
-    let mut values: Vec<f32> = depth
-        .iter()
-        .step_by(7)
-        .copied()
-        .filter(|z| *z > 0.0 && z.is_finite())
-        .collect();
+/// Median of the valid (positive, finite) depths, on a subsample (every 7th pixel in row-major
+/// order) for speed; `values` is the reused buffer for it.
+fn median_valid_depth(depth: ArrayView2<f32>, values: &mut Vec<f32>) -> Option<f32> {
+    values.clear();
+    let valid = |z: &f32| *z > 0.0 && z.is_finite();
+    match depth.as_slice() {
+        Some(d) => values.extend(d.iter().step_by(7).copied().filter(valid)),
+        None => values.extend(depth.iter().step_by(7).copied().filter(valid)),
+    }
     if values.is_empty() {
         return None;
     }

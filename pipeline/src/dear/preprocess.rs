@@ -32,7 +32,7 @@ pub fn normalize_amplitude_into(
     Zip::from(&mut out)
         .and(&raw)
         .and(&depth)
-        .for_each(|o, &a, &z| *o = if is_valid_depth(z) { a * z * z } else { 0.0 });
+        .par_for_each(|o, &a, &z| *o = if is_valid_depth(z) { a * z * z } else { 0.0 });
     scratch.clear();
     scratch.extend(
         out.iter()
@@ -42,7 +42,7 @@ pub fn normalize_amplitude_into(
     );
     let scale = percentile_linear(scratch, percentile).filter(|s| *s > 0.0 && s.is_finite());
     match scale {
-        Some(s) => out.mapv_inplace(|i| (i / s).clamp(0.0, 1.0)),
+        Some(s) => out.par_mapv_inplace(|i| (i / s).clamp(0.0, 1.0)),
         None => out.fill(0.0),
     }
     scale
@@ -74,12 +74,40 @@ pub fn percentile_linear(values: &mut [f32], p: f32) -> Option<f32> {
 pub fn rgb_planes_into(rgb: ArrayView3<u8>, planes: &mut [Array2<f32>; 3]) {
     let (h, w, c) = rgb.dim();
     assert_eq!(c, 3, "rgb has {c} channels, expected 3");
-    for (ch, plane) in planes.iter_mut().enumerate() {
+    for plane in planes.iter() {
         assert_eq!(plane.dim(), (h, w), "rgb plane shape differs");
-        Zip::from(plane)
-            .and(rgb.index_axis(ndarray::Axis(2), ch))
-            .for_each(|o, &v| *o = f32::from(v) / 255.0);
     }
+    // The 256 possible values, each computed as `f32::from(v) / 255.0`.
+    let mut lut = [0.0f32; 256];
+    for (v, l) in lut.iter_mut().enumerate() {
+        *l = f32::from(v as u8) / 255.0;
+    }
+    let [r, g, b] = planes;
+    // One pass over the interleaved pixels, rows in parallel.
+    Zip::from(r.rows_mut())
+        .and(g.rows_mut())
+        .and(b.rows_mut())
+        .and(rgb.outer_iter())
+        .par_for_each(|mut r, mut g, mut b, px| {
+            let lut = |v: u8| lut[usize::from(v)];
+            match (
+                px.as_slice(),
+                r.as_slice_mut(),
+                g.as_slice_mut(),
+                b.as_slice_mut(),
+            ) {
+                (Some(px), Some(r), Some(g), Some(b)) => {
+                    for (((p, r), g), b) in px.chunks_exact(3).zip(r).zip(g).zip(b) {
+                        (*r, *g, *b) = (lut(p[0]), lut(p[1]), lut(p[2]));
+                    }
+                }
+                _ => {
+                    for (x, p) in px.outer_iter().enumerate() {
+                        (r[x], g[x], b[x]) = (lut(p[0]), lut(p[1]), lut(p[2]));
+                    }
+                }
+            }
+        });
 }
 
 #[cfg(test)]

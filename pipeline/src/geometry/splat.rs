@@ -22,7 +22,8 @@
 //! shift accurately. The returned flow is recomputed from the output depth, so at valid pixels
 //! it is exactly `P.flow_at(depth)`.
 
-use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayViewMut2};
+use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayViewMut2, Axis};
+use rayon::prelude::*;
 
 use crate::calibration::Calibration;
 use crate::frame::Flow;
@@ -49,38 +50,70 @@ pub struct SynthesizedView {
     pub valid: Array2<bool>,
 }
 
+/// The cell a point splatted at `(tx, ty)` falls in: its top-left pixel `(x0, y0)` and the
+/// bilinear weights of the taps `(y0, x0), (y0, x0+1), (y0+1, x0), (y0+1, x0+1)`, or `None`
+/// for a non-finite (or absurdly far, ≥ 1e9 px) point.
+///
+/// `floor` is computed by truncation: without SSE4.1 (the default x86-64 target) `f32::floor`
+/// is a call per tap point, which was a tenth of the daemon's splat. The result is the same:
+/// `|t| < 1e9 < 2³¹`, and for `|t| ≥ 2²³` every `f32` is already an integer.
+#[inline]
+fn splat_cell(tx: f32, ty: f32) -> Option<(i64, i64, [f32; 4])> {
+    // Written so that NaN fails the test.
+    if !(tx.abs() < 1e9 && ty.abs() < 1e9) {
+        return None;
+    }
+    let floor = |t: f32| {
+        let i = t as i32;
+        if i as f32 > t {
+            i - 1
+        } else {
+            i
+        }
+    };
+    let (x0, y0) = (floor(tx), floor(ty));
+    let (fx, fy) = (tx - x0 as f32, ty - y0 as f32);
+    Some((
+        i64::from(x0),
+        i64::from(y0),
+        [
+            (1.0 - fx) * (1.0 - fy),
+            fx * (1.0 - fy),
+            (1.0 - fx) * fy,
+            fx * fy,
+        ],
+    ))
+}
+
 /// Target pixels and bilinear weights of a point splatted at `(tx, ty)`, clipped to the
 /// image and to weights above [`SPLAT_MIN_WEIGHT`].
 fn splat_taps(tx: f32, ty: f32, h: usize, w: usize) -> impl Iterator<Item = ((usize, usize), f32)> {
-    let finite = tx.is_finite() && ty.is_finite() && tx.abs() < 1e9 && ty.abs() < 1e9;
-    let (x0, y0) = if finite {
-        (tx.floor(), ty.floor())
-    } else {
-        (0.0, 0.0)
-    };
-    let (fx, fy) = (tx - x0, ty - y0);
-    let taps = [
-        (0i64, 0i64, (1.0 - fx) * (1.0 - fy)),
-        (0, 1, fx * (1.0 - fy)),
-        (1, 0, (1.0 - fx) * fy),
-        (1, 1, fx * fy),
-    ];
-    taps.into_iter().filter_map(move |(dy, dx, wt)| {
-        let (y, x) = (y0 as i64 + dy, x0 as i64 + dx);
-        (finite
-            && wt > SPLAT_MIN_WEIGHT
-            && y >= 0
-            && x >= 0
-            && (y as usize) < h
-            && (x as usize) < w)
-            .then_some(((y as usize, x as usize), wt))
-    })
+    splat_cell(tx, ty)
+        .into_iter()
+        .flat_map(move |(x0, y0, wts)| {
+            [(0i64, 0i64), (0, 1), (1, 0), (1, 1)]
+                .into_iter()
+                .zip(wts)
+                .filter_map(move |((dy, dx), wt)| {
+                    let (y, x) = (y0 + dy, x0 + dx);
+                    (wt > SPLAT_MIN_WEIGHT
+                        && y >= 0
+                        && x >= 0
+                        && (y as usize) < h
+                        && (x as usize) < w)
+                        .then_some(((y as usize, x as usize), wt))
+                })
+        })
 }
 
 /// Passes 1 and 2 of the module's method: the accumulated bilinear weight, weighted depth
 /// and (when colour is splatted) weighted colour of the front surface at every target pixel,
 /// as flat row-major buffers. Kept between calls by [`SplatScratch`] users: the daemon splats
 /// every frame, and fresh 640×480 buffers cost page faults each time.
+///
+/// The depth-only path ([`splat_depth_with`], the daemon's per-frame alignment) keeps its own
+/// buffers: the landing point of every source pixel, computed once, and the passes run per band
+/// of target rows in parallel (see [`SplatScratch::resolve`]).
 #[derive(Debug, Clone, Default)]
 pub struct SplatScratch {
     zbuf: Vec<f32>,
@@ -88,6 +121,18 @@ pub struct SplatScratch {
     /// Weight of every surface that landed, front or not.
     any_weight: Vec<f32>,
     depth_sum: Vec<f32>,
+    /// Depth-only path: `[x, y]` landing point of every source pixel (NaN: no valid source).
+    landing: Vec<[f32; 2]>,
+    /// Depth-only path: the source depth, row-major.
+    source: Vec<f32>,
+    /// Depth-only path: lowest and highest landing row of each source row (`(∞, −∞)` when the
+    /// row has no valid source), so a band skips the source rows that cannot reach it.
+    row_span: Vec<(f32, f32)>,
+    /// Depth-only path, per target pixel: `[z-buffer, front weight, any weight, depth sum]`
+    /// side by side, the four values each tap touches.
+    acc: Vec<[f32; 4]>,
+    /// Depth-only path: the output when the caller's view is not contiguous.
+    out: Vec<f32>,
 }
 
 /// Where source pixel `(y, x)` of depth `z` lands in the target view, if it is a valid source.
@@ -156,6 +201,206 @@ impl SplatScratch {
     }
 }
 
+/// Calls `f(target index within the band, weight, source depth)` for every tap of the
+/// depth-only splat that lands in target rows `r0..r1`, in row-major source order and the
+/// fixed tap order (those of [`splat_taps`]), skipping source rows whose span cannot reach
+/// the band. A tap row is `floor(ty)` or `floor(ty) + 1`.
+#[inline(always)]
+fn band_taps(
+    landing: &[[f32; 2]],
+    source: &[f32],
+    spans: &[(f32, f32)],
+    w: usize,
+    (r0, r1): (usize, usize),
+    mut f: impl FnMut(usize, f32, f32),
+) {
+    let (r0i, r1i) = (r0 as i64, r1 as i64);
+    for (sy, &(lo, hi)) in spans.iter().enumerate() {
+        if !(hi >= r0 as f32 - 1.0 && lo < r1 as f32) {
+            continue;
+        }
+        let land = &landing[sy * w..(sy + 1) * w];
+        let src = &source[sy * w..(sy + 1) * w];
+        for (&[tx, ty], &z) in land.iter().zip(src) {
+            let Some((x0, y0, wts)) = splat_cell(tx, ty) else {
+                continue;
+            };
+            if y0 + 1 < r0i || y0 >= r1i {
+                continue;
+            }
+            if y0 >= r0i && y0 + 1 < r1i && x0 >= 0 && x0 + 1 < w as i64 {
+                // The common case, all four taps inside: no per-tap bounds tests.
+                let t = (y0 - r0i) as usize * w + x0 as usize;
+                for (k, &wt) in wts.iter().enumerate() {
+                    if wt > SPLAT_MIN_WEIGHT {
+                        f(t + (k >> 1) * w + (k & 1), wt, z);
+                    }
+                }
+                continue;
+            }
+            for (k, &wt) in wts.iter().enumerate() {
+                let (y, x) = (y0 + (k >> 1) as i64, x0 + (k & 1) as i64);
+                if wt > SPLAT_MIN_WEIGHT && y >= r0i && y < r1i && x >= 0 && (x as usize) < w {
+                    f((y - r0i) as usize * w + x as usize, wt, z);
+                }
+            }
+        }
+    }
+}
+
+/// Where the depth-only splat also writes the flow of its output: the `u` and `v` planes
+/// (row-major) and the flow for pixels left invalid (`None`: 0).
+pub(crate) type FlowOut<'a> = (&'a mut [f32], &'a mut [f32], Option<(f32, f32)>);
+
+/// Target rows per band of the parallel depth-only splat: about eight bands per thread, so
+/// uneven bands (sky above, a near object below) still share the threads out evenly, and
+/// tall enough that the source rows two bands both read (those landing across the boundary)
+/// stay few.
+fn band_rows(h: usize) -> usize {
+    h.div_ceil(8 * rayon::current_num_threads()).max(8)
+}
+
+impl SplatScratch {
+    /// Step 1 of the depth-only splat: every source pixel's landing point and each source
+    /// row's span of landing rows. Rows run in parallel; each value is computed exactly as
+    /// [`landing`] does.
+    pub(crate) fn prepare(&mut self, depth: ArrayView2<f32>, perturbation: &Calibration) {
+        let (h, w) = depth.dim();
+        let n = h * w;
+        self.landing.resize(n, [0.0; 2]);
+        self.source.resize(n, 0.0);
+        self.row_span.resize(h, (0.0, 0.0));
+        if n == 0 {
+            return;
+        }
+        let p = *perturbation;
+        self.landing[..n]
+            .par_chunks_mut(w)
+            .zip(self.source[..n].par_chunks_mut(w))
+            .zip(self.row_span[..h].par_iter_mut())
+            .zip(depth.axis_iter(Axis(0)).into_par_iter())
+            .enumerate()
+            .for_each(|(y, (((land, src), span), row))| {
+                let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                for (x, ((l, s), &z)) in land.iter_mut().zip(src.iter_mut()).zip(row).enumerate() {
+                    *s = z;
+                    *l = match landing(&p, y, x, z) {
+                        Some((tx, ty)) => {
+                            if splat_cell(tx, ty).is_some() {
+                                lo = lo.min(ty);
+                                hi = hi.max(ty);
+                            }
+                            [tx, ty]
+                        }
+                        None => [f32::NAN; 2],
+                    };
+                }
+                *span = (lo, hi);
+            });
+    }
+
+    /// Steps 2 and 3 of the depth-only splat after [`prepare`](Self::prepare): passes 1 to 3
+    /// of the module's method into `out` (row-major), and when `flow` is given, the flow of
+    /// the result into its planes: `P.flow_at(out)` where valid, else the fallback (or 0).
+    ///
+    /// The target rows are cut into bands that run in parallel; each band walks the source
+    /// pixels in row-major order and keeps only the taps that fall inside it. Every target
+    /// therefore sees the same contributions in the same order as the serial scatter (a
+    /// source adds at most one tap to a target), so the sums, and the output, are
+    /// bit-identical and do not depend on the number of threads.
+    pub(crate) fn resolve(
+        &mut self,
+        (h, w): (usize, usize),
+        perturbation: &Calibration,
+        out: &mut [f32],
+        flow: Option<FlowOut<'_>>,
+    ) {
+        let n = h * w;
+        if n == 0 {
+            return;
+        }
+        self.acc.resize(n, [0.0; 4]);
+        let p = *perturbation;
+        let rows = band_rows(h);
+        let (landing, source, spans) = (&self.landing[..n], &self.source[..n], &self.row_span[..h]);
+        let band = |b: usize, acc: &mut [[f32; 4]], out: &mut [f32], flow: Option<FlowOut<'_>>| {
+            let r0 = b * rows;
+            let r1 = r0 + acc.len() / w;
+            acc.fill([f32::INFINITY, 0.0, 0.0, 0.0]);
+            // Pass 1: z-buffer.
+            band_taps(landing, source, spans, w, (r0, r1), |t, _, z| {
+                if z < acc[t][0] {
+                    acc[t][0] = z;
+                }
+            });
+            // Pass 2: accumulate the front surface.
+            band_taps(landing, source, spans, w, (r0, r1), |t, wt, z| {
+                let a = &mut acc[t];
+                a[2] += wt;
+                if same_surface(a[0], z) {
+                    a[1] += wt;
+                    a[3] += wt * z;
+                }
+            });
+            // Pass 3: normalise and validate.
+            for (o, a) in out.iter_mut().zip(acc.iter()) {
+                let [_, ws, any, zs] = *a;
+                let z = zs / ws.max(f32::MIN_POSITIVE);
+                *o = if ws > 0.0 && any >= SPLAT_MIN_COVERAGE && p.flow_at(z).is_some() {
+                    z
+                } else {
+                    0.0
+                };
+            }
+            if let Some((u, v, fallback)) = flow {
+                let fallback = fallback.unwrap_or((0.0, 0.0));
+                for ((u, v), &z) in u.iter_mut().zip(v.iter_mut()).zip(out.iter()) {
+                    (*u, *v) = p.flow_at(z).unwrap_or(fallback);
+                }
+            }
+        };
+        let bw = rows * w;
+        let acc = &mut self.acc[..n];
+        match flow {
+            Some((u, v, fallback)) => acc
+                .par_chunks_mut(bw)
+                .zip(out.par_chunks_mut(bw))
+                .zip(u.par_chunks_mut(bw))
+                .zip(v.par_chunks_mut(bw))
+                .enumerate()
+                .for_each(|(b, (((acc, out), u), v))| band(b, acc, out, Some((u, v, fallback)))),
+            None => acc
+                .par_chunks_mut(bw)
+                .zip(out.par_chunks_mut(bw))
+                .enumerate()
+                .for_each(|(b, (acc, out))| band(b, acc, out, None)),
+        }
+    }
+
+    /// [`resolve`](Self::resolve) into a view of any layout (through a scratch buffer when it
+    /// is not contiguous).
+    pub(crate) fn resolve_into(
+        &mut self,
+        perturbation: &Calibration,
+        mut out: ArrayViewMut2<f32>,
+        flow: Option<FlowOut<'_>>,
+    ) {
+        let dim = out.dim();
+        match out.as_slice_mut() {
+            Some(o) => self.resolve(dim, perturbation, o, flow),
+            None => {
+                let mut buf = std::mem::take(&mut self.out);
+                buf.resize(dim.0 * dim.1, 0.0);
+                self.resolve(dim, perturbation, &mut buf, flow);
+                for (o, &b) in out.iter_mut().zip(&buf) {
+                    *o = b;
+                }
+                self.out = buf;
+            }
+        }
+    }
+}
+
 /// The depth of `depth`'s surfaces as seen from the view `perturbation` describes: each pixel
 /// of `out` is the front surface's depth, or 0 where no surface lands (disocclusions, the
 /// border the view moved away from).
@@ -187,26 +432,12 @@ pub fn splat_depth_into(
 pub fn splat_depth_with(
     depth: ArrayView2<f32>,
     perturbation: &Calibration,
-    mut out: ArrayViewMut2<f32>,
+    out: ArrayViewMut2<f32>,
     scratch: &mut SplatScratch,
 ) {
     assert_eq!(out.dim(), depth.dim(), "splat_depth_into: shapes differ");
-    scratch.splat_front(depth, perturbation, None);
-    let (_, w) = depth.dim();
-    for ((y, x), o) in out.indexed_iter_mut() {
-        let t = y * w + x;
-        let (ws, any, zs) = (
-            scratch.weight[t],
-            scratch.any_weight[t],
-            scratch.depth_sum[t],
-        );
-        let z = zs / ws.max(f32::MIN_POSITIVE);
-        *o = if ws > 0.0 && any >= SPLAT_MIN_COVERAGE && perturbation.flow_at(z).is_some() {
-            z
-        } else {
-            0.0
-        };
-    }
+    scratch.prepare(depth, perturbation);
+    scratch.resolve_into(perturbation, out, None);
 }
 
 /// Forward-warp an aligned `(rgb, depth)` sample on the ToF grid into the RGB view that the

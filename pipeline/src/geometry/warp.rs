@@ -39,9 +39,11 @@ pub(crate) fn bilinear_taps(sx: f32, sy: f32, h: usize, w: usize) -> Option<Taps
     if !(sx >= 0.0 && sx <= (w - 1) as f32 && sy >= 0.0 && sy <= (h - 1) as f32) {
         return None;
     }
-    // Non-negative here, so truncation is floor (and avoids a libm call per sample).
-    let x0 = (sx as usize).min(w - 1);
-    let y0 = (sy as usize).min(h - 1);
+    // Non-negative here, so truncation is floor (and avoids a libm call per sample). Through
+    // i32 (the point is inside the image, far below 2³¹): x86-64 has no direct f32 → u64
+    // conversion, and the emulated one cost a tenth of a warp.
+    let x0 = (sx as i32 as usize).min(w - 1);
+    let y0 = (sy as i32 as usize).min(h - 1);
     let x1 = (x0 + 1).min(w - 1);
     let y1 = (y0 + 1).min(h - 1);
     let fx = sx - x0 as f32;

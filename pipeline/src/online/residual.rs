@@ -22,6 +22,7 @@
 //!   network.
 
 use ndarray::{ArrayView2, ArrayView3};
+use rayon::prelude::*;
 
 use crate::geometry::surface::is_valid_depth;
 
@@ -61,10 +62,13 @@ pub struct EdgeAlignment {
 #[derive(Debug, Clone)]
 pub struct EdgeCheck {
     search_px: usize,
+    luma: Vec<f32>,
     luma_gradient: Vec<f32>,
     amplitude_gradient: Vec<f32>,
     valid: Vec<bool>,
     samples: Vec<u32>,
+    /// `|∇L|` at each sample and its square, in f64 as [`Sums::add`] uses them.
+    sample_luma: Vec<(f64, f64)>,
     ncc: Vec<f32>,
 }
 
@@ -80,12 +84,14 @@ struct Sums {
 }
 
 impl Sums {
-    fn add(&mut self, a: f32, b: f32) {
-        let (a, b) = (f64::from(a), f64::from(b));
+    /// Adds the pair `(a, b)`, with `aa = a · a` computed by the caller (once per sample
+    /// rather than once per shift).
+    #[inline]
+    fn add_f64(&mut self, a: f64, aa: f64, b: f64) {
         self.n += 1;
         self.a += a;
         self.b += b;
-        self.aa += a * a;
+        self.aa += aa;
         self.bb += b * b;
         self.ab += a * b;
     }
@@ -107,10 +113,12 @@ impl EdgeCheck {
     pub fn new(search_px: usize) -> Self {
         EdgeCheck {
             search_px,
+            luma: Vec::new(),
             luma_gradient: Vec::new(),
             amplitude_gradient: Vec::new(),
             valid: Vec::new(),
             samples: Vec::new(),
+            sample_luma: Vec::new(),
             ncc: Vec::new(),
         }
     }
@@ -150,22 +158,31 @@ impl EdgeCheck {
             }
         }
 
+        self.sample_luma.clear();
+        self.sample_luma.extend(self.samples.iter().map(|&i| {
+            let a = f64::from(self.luma_gradient[i as usize]);
+            (a, a * a)
+        }));
+
+        // One shift per task. Each shift's sums run over the samples in order, as
+        // `Sums::add` would, so the result does not depend on the threads.
         let side = 2 * r + 1;
         self.ncc.clear();
         self.ncc.resize(side * side, f32::NAN);
-        for dy in 0..side {
-            for dx in 0..side {
-                let offset = (dy as isize - r as isize) * w as isize + (dx as isize - r as isize);
-                let mut s = Sums::default();
-                for &i in &self.samples {
-                    let j = (i as isize + offset) as usize;
-                    if self.valid[j] {
-                        s.add(self.luma_gradient[i as usize], self.amplitude_gradient[j]);
-                    }
+        let (samples, sample_luma) = (&self.samples, &self.sample_luma);
+        let (valid, amplitude_gradient) = (&self.valid, &self.amplitude_gradient);
+        self.ncc.par_iter_mut().enumerate().for_each(|(k, ncc)| {
+            let (dy, dx) = (k / side, k % side);
+            let offset = (dy as isize - r as isize) * w as isize + (dx as isize - r as isize);
+            let mut s = Sums::default();
+            for (&i, &(a, aa)) in samples.iter().zip(sample_luma) {
+                let j = (i as isize + offset) as usize;
+                if valid[j] {
+                    s.add_f64(a, aa, f64::from(amplitude_gradient[j]));
                 }
-                self.ncc[dy * side + dx] = s.ncc().unwrap_or(f32::NAN);
             }
-        }
+            *ncc = s.ncc().unwrap_or(f32::NAN);
+        });
         // The window's centre is the zero shift.
         let zero = self.ncc[r * side + r];
         if !zero.is_finite() {
@@ -224,43 +241,74 @@ impl EdgeCheck {
     ) {
         let (h, w) = warped_depth.dim();
         let n = h * w;
-        for buffer in [&mut self.luma_gradient, &mut self.amplitude_gradient] {
-            buffer.clear();
+        for buffer in [
+            &mut self.luma,
+            &mut self.luma_gradient,
+            &mut self.amplitude_gradient,
+        ] {
             buffer.resize(n, 0.0);
         }
-        self.valid.clear();
         self.valid.resize(n, false);
-        let luma = |y: usize, x: usize| {
-            (0.299 * f32::from(rgb[[y, x, 0]])
-                + 0.587 * f32::from(rgb[[y, x, 1]])
-                + 0.114 * f32::from(rgb[[y, x, 2]]))
-                / 255.0
-        };
-        for y in 1..h - 1 {
-            for x in 1..w - 1 {
-                let ok = [(y, x), (y - 1, x), (y + 1, x), (y, x - 1), (y, x + 1)]
-                    .iter()
-                    .all(|&p| is_valid_depth(warped_depth[p]));
-                if !ok {
-                    continue;
+        let rgb = rgb.as_standard_layout();
+        let rgb = rgb.as_slice().expect("standard layout is contiguous");
+        let amplitude = warped_amplitude.as_standard_layout();
+        let amplitude = amplitude.as_slice().expect("standard layout is contiguous");
+        let depth = warped_depth.as_standard_layout();
+        let depth = depth.as_slice().expect("standard layout is contiguous");
+        self.luma
+            .par_chunks_mut(w)
+            .zip(rgb.par_chunks(3 * w))
+            .for_each(|(luma, rgb)| {
+                for (l, p) in luma.iter_mut().zip(rgb.chunks_exact(3)) {
+                    *l = (0.299 * f32::from(p[0])
+                        + 0.587 * f32::from(p[1])
+                        + 0.114 * f32::from(p[2]))
+                        / 255.0;
                 }
-                let a = |yy: usize, xx: usize| warped_amplitude[[yy, xx]];
+            });
+        let luma = &self.luma;
+        // Rows in parallel, on flat slices; the border rows and columns stay invalid.
+        self.luma_gradient
+            .par_chunks_mut(w)
+            .zip(self.amplitude_gradient.par_chunks_mut(w))
+            .zip(self.valid.par_chunks_mut(w))
+            .enumerate()
+            .for_each(|(y, ((lg, ag), valid))| {
+                lg.fill(0.0);
+                ag.fill(0.0);
+                valid.fill(false);
+                if y == 0 || y + 1 >= h {
+                    return;
+                }
+                fn row(img: &[f32], w: usize, yy: usize) -> &[f32] {
+                    &img[yy * w..(yy + 1) * w]
+                }
+                let (d0, d1, d2) = (row(depth, w, y - 1), row(depth, w, y), row(depth, w, y + 1));
+                let (a0, a1, a2) = (
+                    row(amplitude, w, y - 1),
+                    row(amplitude, w, y),
+                    row(amplitude, w, y + 1),
+                );
+                let (l0, l1, l2) = (row(luma, w, y - 1), row(luma, w, y), row(luma, w, y + 1));
                 // sqrt, not hypot: no overflow to guard against here, and hypot was 4 % of
                 // a VGA frame.
                 let magnitude = |gx: f32, gy: f32| (gx * gx + gy * gy).sqrt();
-                let ga = magnitude(a(y, x + 1) - a(y, x - 1), a(y + 1, x) - a(y - 1, x));
-                if !ga.is_finite() {
-                    continue;
+                for x in 1..w.saturating_sub(1) {
+                    let ok = [d1[x], d0[x], d2[x], d1[x - 1], d1[x + 1]]
+                        .iter()
+                        .all(|&z| is_valid_depth(z));
+                    if !ok {
+                        continue;
+                    }
+                    let ga = magnitude(a1[x + 1] - a1[x - 1], a2[x] - a0[x]);
+                    if !ga.is_finite() {
+                        continue;
+                    }
+                    ag[x] = ga;
+                    lg[x] = magnitude(l1[x + 1] - l1[x - 1], l2[x] - l0[x]);
+                    valid[x] = true;
                 }
-                let i = y * w + x;
-                self.amplitude_gradient[i] = ga;
-                self.luma_gradient[i] = magnitude(
-                    luma(y, x + 1) - luma(y, x - 1),
-                    luma(y + 1, x) - luma(y - 1, x),
-                );
-                self.valid[i] = true;
-            }
-        }
+            });
     }
 }
 
