@@ -6,7 +6,7 @@ use dear_e2e_tests::processes::{unique_service, Daemon, Probe};
 use dear_e2e_tests::{expected_payload_hashes, scene};
 use dear_pipeline::Calibration;
 use dear_proto::flags;
-use deard::config::{PipelineConfig, RefineMode};
+use deard::config::{NetworkPlacement, PipelineConfig, RefineMode};
 
 const W: u32 = 160;
 const H: u32 = 120;
@@ -38,10 +38,14 @@ fn with_a_bundle_the_daemon_publishes_the_dear_chain_output_with_online_calibrat
     let tmp = tempfile::tempdir().unwrap();
     let capture = scene::write_capture(&tmp.path().join("cap"), 8, W, H, calibration());
     let bundle = fixture_bundle();
+    // The network inline on the frames that ask for it: deterministic, so every payload can
+    // be compared with the in-process chain (background delivery depends on timing; the next
+    // test covers it).
     let pipeline = PipelineConfig {
         refine: RefineMode::Dear,
         bundle: bundle.clone(),
         online_interval_frames: 3,
+        online_network: NetworkPlacement::Inline,
         ..PipelineConfig::default()
     };
     let expected = expected_payload_hashes(&capture, &pipeline);
@@ -57,6 +61,8 @@ fn with_a_bundle_the_daemon_publishes_the_dear_chain_output_with_online_calibrat
             bundle.to_str().unwrap(),
             "--online-interval",
             "3",
+            "--online-network",
+            "inline",
             "--pacing",
             "fast",
             "--replay",
@@ -87,6 +93,65 @@ fn with_a_bundle_the_daemon_publishes_the_dear_chain_output_with_online_calibrat
     // The first frame has no estimate yet, so the rough-flow network runs on it. (How often it
     // runs after that depends on whether the untrained fixture's measurements pass the gate.)
     assert_ne!(seen[0].flags & flags::CALIBRATION_ESTIMATED, 0);
+    assert!(daemon.terminate(WAIT).expect("stops").success());
+}
+
+/// The daemon's default: the network frames run on the background worker. No frame waits for
+/// it — the first frame is published without a network measurement, aligned by the factory
+/// calibration — and the worker's measurements reach later frames (the replay loops at the
+/// capture's 30 fps until one does; an unoptimised test build measures slowly).
+#[test]
+fn with_the_network_in_the_background_no_frame_waits_and_measurements_arrive() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = scene::write_capture(&tmp.path().join("cap"), 30, W, H, calibration());
+    let bundle = fixture_bundle();
+    let service = unique_service("dear-background");
+    let limit = 900;
+    let probe = Probe::start(&service, limit);
+    let mut daemon = Daemon::start(
+        &service,
+        &[
+            "--refine",
+            "dear",
+            "--bundle",
+            bundle.to_str().unwrap(),
+            "--online-interval",
+            "3",
+            "--pacing",
+            "timestamps",
+            "--loop",
+            "--replay",
+            capture.root().to_str().unwrap(),
+        ],
+        &tmp.path().join("deard.log"),
+    );
+    let want = flags::ALIGNED | flags::REFINED_NETWORK | flags::CALIBRATION_ONLINE;
+    let mut seen = Vec::new();
+    while seen.len() < limit {
+        let s = probe.next(WAIT).expect("the daemon keeps publishing");
+        assert_eq!(
+            s.flags & want,
+            want,
+            "frame {} flags {:x}",
+            s.frame_id,
+            s.flags
+        );
+        let delivered = s.flags & flags::CALIBRATION_ESTIMATED != 0;
+        seen.push(s);
+        if delivered {
+            break;
+        }
+    }
+    assert_eq!(
+        seen[0].flags & flags::CALIBRATION_ESTIMATED,
+        0,
+        "the first frame must not wait for the network"
+    );
+    assert!(
+        seen.len() < limit,
+        "no background measurement reached any of {limit} frames\n{}",
+        daemon.log_text()
+    );
     assert!(daemon.terminate(WAIT).expect("stops").success());
 }
 
