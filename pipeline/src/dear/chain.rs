@@ -406,11 +406,7 @@ impl DearChain {
             || {
                 check
                     .then(|| {
-                        edge_check.measure(
-                            input.rgb,
-                            amplitude_warped.view(),
-                            depth_warped.view(),
-                        )
+                        edge_check.measure(input.rgb, amplitude_warped.view(), depth_warped.view())
                     })
                     .flatten()
             },
