@@ -168,6 +168,26 @@ pub enum CalibrationMode {
     EveryFrame,
 }
 
+impl CalibrationMode {
+    /// The name used in the configuration file and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            CalibrationMode::Online => "online",
+            CalibrationMode::EveryFrame => "every-frame",
+        }
+    }
+}
+
+impl std::str::FromStr for CalibrationMode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        [CalibrationMode::Online, CalibrationMode::EveryFrame]
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("{s:?}: expected \"online\" or \"every-frame\""))
+    }
+}
+
 /// Where the online mode's network frames run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -176,6 +196,26 @@ pub enum NetworkPlacement {
     Background,
     /// On the frame that asked for it.
     Inline,
+}
+
+impl NetworkPlacement {
+    /// The name used in the configuration file and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            NetworkPlacement::Background => "background",
+            NetworkPlacement::Inline => "inline",
+        }
+    }
+}
+
+impl std::str::FromStr for NetworkPlacement {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        [NetworkPlacement::Background, NetworkPlacement::Inline]
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("{s:?}: expected \"background\" or \"inline\""))
+    }
 }
 
 /// Process-level behaviour.

@@ -49,13 +49,13 @@ struct Cli {
     #[arg(long)]
     bundle: Option<PathBuf>,
     /// Calibration with a bundle: online or every-frame ([pipeline] calibration).
-    #[arg(long, value_parser = parse_calibration)]
+    #[arg(long)]
     calibration: Option<CalibrationMode>,
     /// Frames between rough-flow runs in online mode ([pipeline] online_interval_frames).
     #[arg(long)]
     online_interval: Option<u32>,
     /// Where online mode's network frames run: background or inline ([pipeline] online_network).
-    #[arg(long, value_parser = parse_network)]
+    #[arg(long)]
     online_network: Option<NetworkPlacement>,
     /// Exit when a non-looping replay ends ([runtime] exit_when_done).
     #[arg(long)]
@@ -66,16 +66,6 @@ struct Cli {
     /// Print the effective configuration as TOML and exit.
     #[arg(long)]
     print_config: bool,
-}
-
-fn parse_network(s: &str) -> Result<NetworkPlacement, String> {
-    match s {
-        "background" => Ok(NetworkPlacement::Background),
-        "inline" => Ok(NetworkPlacement::Inline),
-        _ => Err(format!(
-            "unknown placement {s:?}; choose background or inline"
-        )),
-    }
 }
 
 fn parse_pacing(s: &str) -> Result<Pacing, String> {
@@ -94,14 +84,6 @@ fn parse_refine(s: &str) -> Result<RefineMode, String> {
         _ => Err(format!(
             "{s:?}: expected \"dear\", \"classical\" or \"none\""
         )),
-    }
-}
-
-fn parse_calibration(s: &str) -> Result<CalibrationMode, String> {
-    match s {
-        "online" => Ok(CalibrationMode::Online),
-        "every-frame" => Ok(CalibrationMode::EveryFrame),
-        _ => Err(format!("{s:?}: expected \"online\" or \"every-frame\"")),
     }
 }
 

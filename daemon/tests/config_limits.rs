@@ -159,3 +159,29 @@ fn a_static_calibration_beyond_the_image_is_a_startup_error() {
         "once: {err}"
     );
 }
+
+/// `online_network` is background by default, inline on request, and an unknown value in the
+/// file or on the command line is refused by name (the file and the flags share one parser).
+#[test]
+fn online_network_placement_is_background_by_default_and_checked() {
+    use deard::config::NetworkPlacement;
+    assert_eq!(
+        accepted("").pipeline.online_network,
+        NetworkPlacement::Background
+    );
+    let config = accepted("[pipeline]\nonline_network = \"inline\"\n");
+    assert_eq!(config.pipeline.online_network, NetworkPlacement::Inline);
+    let err = rejected("[pipeline]\nonline_network = \"sometimes\"\n");
+    assert!(
+        err.contains("sometimes") || err.contains("online_network"),
+        "{err}"
+    );
+    for p in [NetworkPlacement::Background, NetworkPlacement::Inline] {
+        assert_eq!(p.name().parse::<NetworkPlacement>(), Ok(p));
+    }
+    let err = "sometimes".parse::<NetworkPlacement>().unwrap_err();
+    assert!(
+        err.contains("\"sometimes\"") && err.contains("inline"),
+        "{err}"
+    );
+}

@@ -53,7 +53,7 @@ struct Cli {
     online_interval: u32,
     /// Where online mode's network frames run: background (the daemon's default) or inline
     /// ([pipeline] online_network).
-    #[arg(long, default_value = "background", value_parser = parse_network)]
+    #[arg(long, default_value = "background")]
     online_network: NetworkPlacement,
     /// Offer frames at this rate, as a camera does (0: back to back). A frame that took longer
     /// than its period is followed at once by the next.
@@ -64,36 +64,11 @@ struct Cli {
     #[arg(long)]
     machine: bool,
     /// Modes to measure: online, every-frame (repeatable; default both).
-    #[arg(long = "mode", value_parser = parse_mode)]
+    #[arg(long = "mode")]
     modes: Vec<CalibrationMode>,
     /// Also write the figures as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
-}
-
-fn parse_mode(s: &str) -> Result<CalibrationMode, String> {
-    match s {
-        "online" => Ok(CalibrationMode::Online),
-        "every-frame" => Ok(CalibrationMode::EveryFrame),
-        _ => Err(format!("unknown mode {s:?}; choose online or every-frame")),
-    }
-}
-
-fn parse_network(s: &str) -> Result<NetworkPlacement, String> {
-    match s {
-        "background" => Ok(NetworkPlacement::Background),
-        "inline" => Ok(NetworkPlacement::Inline),
-        _ => Err(format!(
-            "unknown placement {s:?}; choose background or inline"
-        )),
-    }
-}
-
-fn mode_name(m: CalibrationMode) -> &'static str {
-    match m {
-        CalibrationMode::Online => "online",
-        CalibrationMode::EveryFrame => "every-frame",
-    }
 }
 
 /// Median, p95 and mean of a set of milliseconds.
@@ -241,10 +216,7 @@ fn run(cli: &Cli) -> Result<(), String> {
             width,
             height,
             threads_available: std::thread::available_parallelism().map_or(1, |n| n.get()),
-            online_network: match cli.online_network {
-                NetworkPlacement::Background => "background",
-                NetworkPlacement::Inline => "inline",
-            },
+            online_network: cli.online_network.name(),
             fps: cli.fps,
             machine: limits,
             modes: reports,
@@ -318,7 +290,7 @@ fn measure(
     }
     let all: Vec<f64> = with.iter().chain(&without).copied().collect();
     Ok(ModeReport {
-        mode: mode_name(mode),
+        mode: mode.name(),
         all: Summary::of(&all).expect("at least one measured frame"),
         without_network: Summary::of(&without),
         with_network: Summary::of(&with),
