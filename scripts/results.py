@@ -510,9 +510,9 @@ def main() -> None:
             f"{sequence['__file__']['frames_evaluated']} frames of a moving scene whose "
             "principal point drifts (sinusoids, 4 px peak; `dear-synth sequence --seed 77`). "
             "AEPE is the error of the flow each frame was aligned with; the per-frame error "
-            "over time is in `out/results/sequence/tracking.csv`. ms / frame of the per-frame "
-            "row excludes the alignment residual; the online row includes it (its trigger "
-            "needs it)."
+            "over time is in `out/results/sequence/tracking.csv`. ms / frame includes the "
+            "alignment check (the online trigger's residual), which runs beside the refinement "
+            "on the second core."
         ),
         "",
         *table_tracking(sequence, untracked),

@@ -300,7 +300,7 @@ impl Processor {
                 header.stage_latency_us[Stage::Flow as usize] = us(t.flow + t.calibrate);
                 header.stage_latency_us[Stage::Fuse as usize] = us(t.fuse);
                 header.stage_latency_us[Stage::Warp as usize] = us(t.warp);
-                header.stage_latency_us[Stage::Refine as usize] = us(t.refine + t.alignment_check);
+                header.stage_latency_us[Stage::Refine as usize] = us(t.refine);
             }
         }
         Ok(())

@@ -146,21 +146,9 @@ impl<T: Send + 'static> BackgroundCalibrator<T> {
         let Some(mut planes) = self.spare.take() else {
             return Ok(Submit::Busy);
         };
-        let (h, w) = planes.depth.dim();
-        let checks: [(&'static str, &[usize], [usize; 3], usize); 3] = [
-            ("rgb", input.rgb.shape(), [h, w, 3], 3),
-            ("amplitude", input.amplitude.shape(), [h, w, 0], 2),
-            ("depth", input.depth.shape(), [h, w, 0], 2),
-        ];
-        for (what, found, expected, rank) in checks {
-            if found != &expected[..rank] {
-                self.spare = Some(planes);
-                return Err(ChainError::Shape {
-                    what,
-                    expected: expected[..rank].to_vec(),
-                    found: found.to_vec(),
-                });
-            }
+        if let Err(error) = input.check_shape(planes.depth.dim()) {
+            self.spare = Some(planes);
+            return Err(error);
         }
         planes.rgb.assign(&input.rgb);
         planes.amplitude.assign(&input.amplitude);

@@ -120,6 +120,16 @@ pub struct ChainInput<'a> {
     pub depth: ArrayView2<'a, f32>,
 }
 
+impl ChainInput<'_> {
+    /// `Ok` when every plane has the `(H, W)` (RGB `(H, W, 3)`) of a stream, else the
+    /// [`ChainError::Shape`] naming the first plane that does not.
+    pub(crate) fn check_shape(&self, (h, w): (usize, usize)) -> Result<(), ChainError> {
+        shape_check("rgb", self.rgb.shape(), &[h, w, 3])?;
+        shape_check("amplitude", self.amplitude.shape(), &[h, w])?;
+        shape_check("depth", self.depth.shape(), &[h, w])
+    }
+}
+
 /// Where the chain writes its result.
 #[derive(Debug)]
 pub struct ChainOutput<'a> {
@@ -146,21 +156,12 @@ pub struct StageTimings {
     /// confidence, and the edge alignment check, which runs beside the refinement on the other
     /// core.
     pub refine: Duration,
-    /// The edge alignment check's time beyond the refinement: zero since it runs beside it
-    /// (kept so that timing consumers need not change).
-    pub alignment_check: Duration,
 }
 
 impl StageTimings {
     /// Sum of the stages.
     pub fn total(&self) -> Duration {
-        self.preprocess
-            + self.flow
-            + self.calibrate
-            + self.fuse
-            + self.warp
-            + self.refine
-            + self.alignment_check
+        self.preprocess + self.flow + self.calibrate + self.fuse + self.warp + self.refine
     }
 }
 
@@ -450,7 +451,7 @@ impl DearChain {
     /// # Errors
     /// As [`process`](Self::process) (no output is written, so only the inputs are checked).
     pub fn measure(&mut self, input: ChainInput<'_>) -> Result<MeasureReport, ChainError> {
-        self.check_input_shapes(&input)?;
+        input.check_shape(self.dim())?;
         let mut t = StageTimings::default();
         let mut clock = Stopwatch::start();
         self.preprocess(input, &mut t, &mut clock);
@@ -579,17 +580,9 @@ impl DearChain {
         output: &ChainOutput<'_>,
     ) -> Result<(), ChainError> {
         let (h, w) = self.dim();
-        let check = shape_check;
-        self.check_input_shapes(input)?;
-        check("output depth", output.depth.shape(), &[h, w])?;
-        check("output confidence", output.confidence.shape(), &[h, w])
-    }
-
-    fn check_input_shapes(&self, input: &ChainInput<'_>) -> Result<(), ChainError> {
-        let (h, w) = self.dim();
-        shape_check("rgb", input.rgb.shape(), &[h, w, 3])?;
-        shape_check("amplitude", input.amplitude.shape(), &[h, w])?;
-        shape_check("depth", input.depth.shape(), &[h, w])
+        input.check_shape((h, w))?;
+        shape_check("output depth", output.depth.shape(), &[h, w])?;
+        shape_check("output confidence", output.confidence.shape(), &[h, w])
     }
 
     /// RGB planes in `[0, 1]` of the last frame.

@@ -359,11 +359,7 @@ impl OnlineCalibrator {
     /// frame): counted as a rejected attempt, so the network is retried after
     /// `retry_frames` and the quality's acceptance drops.
     pub fn deliver_failure(&mut self) {
-        self.last_rejected = true;
-        self.attempts.push_back(false);
-        while self.attempts.len() > self.config.window {
-            self.attempts.pop_front();
-        }
+        self.record(Outcome::Rejected(Rejection::FitFailed));
     }
 
     /// Moves `c` (estimate, accepted and held-back measurements) by the edge shift.
@@ -409,17 +405,22 @@ impl OnlineCalibrator {
                 Ok(()) => self.gate(m),
             },
         };
-        let ok = matches!(outcome, Outcome::Accepted | Outcome::Jump);
-        self.last_rejected = matches!(outcome, Outcome::Rejected(_));
-        self.attempts.push_back(ok);
-        while self.attempts.len() > self.config.window {
-            self.attempts.pop_front();
-        }
-        if ok {
+        self.record(outcome);
+        if matches!(outcome, Outcome::Accepted | Outcome::Jump) {
             self.estimate = Some(median(&self.accepted));
             self.last_estimate_frame = Some(self.frame);
         }
         outcome
+    }
+
+    /// Counts a network attempt's outcome: the acceptance window and the retry trigger.
+    fn record(&mut self, outcome: Outcome) {
+        self.last_rejected = matches!(outcome, Outcome::Rejected(_));
+        self.attempts
+            .push_back(matches!(outcome, Outcome::Accepted | Outcome::Jump));
+        while self.attempts.len() > self.config.window {
+            self.attempts.pop_front();
+        }
     }
 
     fn admit(&self, m: &Measurement) -> Result<(), Rejection> {
