@@ -1,7 +1,8 @@
 """Parity of :mod:`dear_train.geometry` with ``dear-pipeline`` on the shared test vectors.
 
 Every ``fixtures/geometry/*.json`` case written by the Rust side is checked; an unknown case
-name fails (a new Rust case must get a Python check, not be ignored).
+name fails (a new Rust case must get a Python check, not be ignored). The fixtures are committed,
+so a missing or empty directory fails too: a skip would let the two ports drift unnoticed.
 """
 
 from __future__ import annotations
@@ -30,6 +31,12 @@ from dear_train.geometry import (
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "geometry"
 CASES = sorted(FIXTURES.glob("*.json")) if FIXTURES.is_dir() else []
+#: How to regenerate the committed fixtures (fixtures/geometry/README.md).
+REGENERATE = (
+    "regenerate them from the repository root with "
+    "`cargo run -p dear-pipeline --example write_geometry_fixtures` "
+    "(or restore the committed files: `git checkout fixtures/geometry`)"
+)
 #: The Rust side's own tolerance for its committed files (relative to max(1, |x|)).
 TOL = 1e-5
 
@@ -158,9 +165,6 @@ CHECKS = {
 }
 
 
-@pytest.mark.skipif(
-    not CASES, reason=f"no Rust geometry fixtures yet ({FIXTURES} missing or empty)"
-)
 @pytest.mark.parametrize("path", CASES, ids=[p.stem for p in CASES])
 def test_rust_fixture(path: Path) -> None:
     case = json.loads(path.read_text())
@@ -169,8 +173,9 @@ def test_rust_fixture(path: Path) -> None:
 
 
 def test_every_documented_case_is_present() -> None:
-    """Once fixtures exist, all six documented cases must be there."""
-    if not CASES:
-        pytest.skip(f"no Rust geometry fixtures yet ({FIXTURES})")
+    """All six documented cases must be committed; with none, the parametrised test above would
+    have nothing to check, so their absence is a failure that says how to get them back."""
+    assert CASES, f"no Rust geometry fixtures in {FIXTURES}: {REGENERATE}"
     names = {json.loads(p.read_text())["name"] for p in CASES}
-    assert set(CHECKS) <= names, f"missing cases: {sorted(set(CHECKS) - names)}"
+    missing = sorted(set(CHECKS) - names)
+    assert not missing, f"missing cases {missing} in {FIXTURES}: {REGENERATE}"
