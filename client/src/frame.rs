@@ -1,6 +1,6 @@
 //! A received frame: typed, zero-copy views of the shared-memory sample.
 
-use dear_proto::{FrameHeader, PayloadLayout};
+use dear_proto::{FrameHeader, HeaderError, PayloadLayout};
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
 use ndarray::{ArrayView2, ArrayView3};
@@ -19,12 +19,26 @@ impl std::fmt::Debug for Frame {
     }
 }
 
+/// Why a received sample is not a usable frame.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FrameError {
+    /// The header is corrupt, of another protocol version, or does not fit the payload (its
+    /// message names the field).
+    #[error(transparent)]
+    Header(#[from] HeaderError),
+    /// The depth plane cannot be read as `f32` in place (the service was created with another
+    /// payload alignment than the protocol's).
+    #[error("the payload at {address:#x} is not aligned for f32 depth")]
+    Misaligned { address: usize },
+}
+
 impl Frame {
     /// Wraps a sample after checking its header against its payload.
-    pub(crate) fn new(sample: Sample<ipc::Service, [u8], FrameHeader>) -> Result<Self, String> {
+    pub(crate) fn new(sample: Sample<ipc::Service, [u8], FrameHeader>) -> Result<Self, FrameError> {
         let layout = sample.user_header().validate(sample.payload().len())?;
-        if !(sample.payload().as_ptr() as usize).is_multiple_of(std::mem::align_of::<f32>()) {
-            return Err("payload is not aligned for f32 depth".into());
+        let address = sample.payload().as_ptr() as usize;
+        if !address.is_multiple_of(std::mem::align_of::<f32>()) {
+            return Err(FrameError::Misaligned { address });
         }
         Ok(Frame { sample, layout })
     }

@@ -3,22 +3,85 @@
 use std::time::{Duration, Instant};
 
 use dear_proto::service::{frame_event_service, frame_service};
-use iceoryx2::port::listener::Listener;
-use iceoryx2::port::subscriber::Subscriber;
+use dear_proto::{EventServiceError, FrameHeader, FrameServiceError};
+use iceoryx2::node::NodeCreationFailure;
+use iceoryx2::port::listener::{Listener, ListenerCreateError, ListenerWaitError};
+use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
 use iceoryx2::prelude::*;
 
-use crate::frame::Frame;
-use dear_proto::FrameHeader;
+use crate::frame::{Frame, FrameError};
 
-/// Errors of the client SDK.
+/// Why [`Client::connect`] failed. Every variant names the service; the iceoryx2 error is
+/// the [`source`](std::error::Error::source).
+#[derive(Debug, thiserror::Error)]
+pub enum ConnectError {
+    #[error("cannot connect to {service:?}: cannot create an iceoryx2 node")]
+    Node {
+        service: String,
+        #[source]
+        source: NodeCreationFailure,
+    },
+    /// A bad service name, or the service exists with another contract (QoS, header type).
+    #[error("cannot connect to {service:?}")]
+    FrameService {
+        service: String,
+        #[source]
+        source: FrameServiceError,
+    },
+    #[error("cannot connect to {service:?}")]
+    EventService {
+        service: String,
+        #[source]
+        source: EventServiceError,
+    },
+    /// Typically: the service already has its maximum of subscribers.
+    #[error("cannot connect to {service:?}: cannot create a subscriber")]
+    Subscriber {
+        service: String,
+        #[source]
+        source: SubscriberCreateError,
+    },
+    #[error("cannot connect to {service:?}: cannot create a listener for its frame events")]
+    Listener {
+        service: String,
+        #[source]
+        source: ListenerCreateError,
+    },
+}
+
+/// Why receiving a frame ([`Client::try_receive`], [`Client::wait`]) failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ReceiveError {
+    #[error("receiving from {service:?} failed")]
+    Receive {
+        service: String,
+        #[source]
+        source: iceoryx2::port::ReceiveError,
+    },
+    /// Waiting for the daemon's frame event failed (also when a signal interrupted it).
+    #[error("waiting for a frame from {service:?} failed")]
+    Wait {
+        service: String,
+        #[source]
+        source: ListenerWaitError,
+    },
+    /// A sample arrived but is not a valid frame; it was dropped. Not fatal: the next one may
+    /// be fine (`dear watch` counts these).
+    #[error("frame from {service:?} rejected")]
+    BadFrame {
+        service: String,
+        #[source]
+        source: FrameError,
+    },
+}
+
+/// Any error of the client SDK, for applications that handle connecting and receiving alike.
 #[derive(Debug, thiserror::Error)]
 pub enum ClientError {
-    #[error("cannot connect to {service:?}: {message}")]
-    Connect { service: String, message: String },
-    #[error("receiving from {service:?} failed: {message}")]
-    Receive { service: String, message: String },
-    #[error("frame from {service:?} rejected: {message}")]
-    BadFrame { service: String, message: String },
+    #[error(transparent)]
+    Connect(#[from] ConnectError),
+    #[error(transparent)]
+    Receive(#[from] ReceiveError),
 }
 
 /// A subscription to one `deard` frame service.
@@ -32,28 +95,44 @@ pub struct Client {
 impl Client {
     /// Subscribes to `service` (e.g. `dear/cam0/frames`). Works whether or not the daemon is
     /// running yet; frames arrive once it publishes.
-    pub fn connect(service: &str) -> Result<Self, ClientError> {
-        let err = |message: String| ClientError::Connect {
-            service: service.to_string(),
-            message,
-        };
+    pub fn connect(service: &str) -> Result<Self, ConnectError> {
+        let name = || service.to_string();
         let node = NodeBuilder::new()
             // The application owns its signals; iceoryx2 must not install handlers of its own.
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
-            .map_err(|e| err(format!("node: {e:?}")))?;
+            .map_err(|source| ConnectError::Node {
+                service: name(),
+                source,
+            })?;
         // A crashed process may have left ports behind; they would hold queue slots.
         node.try_cleanup_dead_nodes();
-        let frames = frame_service(&node, service).map_err(err)?;
-        let events = frame_event_service(&node, service).map_err(err)?;
-        let subscriber = frames
-            .subscriber_builder()
-            .create()
-            .map_err(|e| err(format!("subscriber: {e:?}")))?;
-        let listener = events
-            .listener_builder()
-            .create()
-            .map_err(|e| err(format!("listener: {e:?}")))?;
+        let frames =
+            frame_service(&node, service).map_err(|source| ConnectError::FrameService {
+                service: name(),
+                source,
+            })?;
+        let events =
+            frame_event_service(&node, service).map_err(|source| ConnectError::EventService {
+                service: name(),
+                source,
+            })?;
+        let subscriber =
+            frames
+                .subscriber_builder()
+                .create()
+                .map_err(|source| ConnectError::Subscriber {
+                    service: name(),
+                    source,
+                })?;
+        let listener =
+            events
+                .listener_builder()
+                .create()
+                .map_err(|source| ConnectError::Listener {
+                    service: name(),
+                    source,
+                })?;
         Ok(Client {
             service: service.to_string(),
             node,
@@ -68,28 +147,28 @@ impl Client {
     }
 
     /// The next queued frame, if any, without waiting.
-    pub fn try_receive(&self) -> Result<Option<Frame>, ClientError> {
+    pub fn try_receive(&self) -> Result<Option<Frame>, ReceiveError> {
         let sample = self
             .subscriber
             .receive()
-            .map_err(|e| ClientError::Receive {
+            .map_err(|source| ReceiveError::Receive {
                 service: self.service.clone(),
-                message: format!("{e:?}"),
+                source,
             })?;
         match sample {
             None => Ok(None),
             Some(sample) => Frame::new(sample)
                 .map(Some)
-                .map_err(|message| ClientError::BadFrame {
+                .map_err(|source| ReceiveError::BadFrame {
                     service: self.service.clone(),
-                    message,
+                    source,
                 }),
         }
     }
 
     /// Waits up to `timeout` for a frame (event-driven: the thread sleeps until the daemon
     /// announces one). `Ok(None)` on timeout.
-    pub fn wait(&self, timeout: Duration) -> Result<Option<Frame>, ClientError> {
+    pub fn wait(&self, timeout: Duration) -> Result<Option<Frame>, ReceiveError> {
         let deadline = Instant::now() + timeout;
         loop {
             if let Some(frame) = self.try_receive()? {
@@ -101,15 +180,15 @@ impl Client {
             }
             self.listener
                 .timed_wait(|_| {}, left)
-                .map_err(|e| ClientError::Receive {
+                .map_err(|source| ReceiveError::Wait {
                     service: self.service.clone(),
-                    message: format!("{e:?}"),
+                    source,
                 })?;
         }
     }
 
     /// Waits without a time limit.
-    pub fn wait_forever(&self) -> Result<Frame, ClientError> {
+    pub fn wait_forever(&self) -> Result<Frame, ReceiveError> {
         loop {
             if let Some(frame) = self.wait(Duration::from_secs(3600))? {
                 return Ok(frame);

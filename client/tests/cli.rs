@@ -1,13 +1,19 @@
 //! The real `dear` binary against a tiny in-test publisher speaking the frame protocol (no
 //! daemon): `dump` writes what was published, `watch` reports it, `list` finds it.
+//!
+//! The transport overwrites a slow subscriber's oldest frame by design, so no test here demands
+//! every frame: they check what the protocol guarantees (samples of one run arrive in
+//! `sequence` order with the content that was published under that number, and gaps are
+//! counted as lost).
 
+use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use dear_pipeline::capture::CaptureDir;
 use dear_proto::service::{frame_event_service, frame_service, FrameEventService, FrameService};
-use dear_proto::{flags, FrameHeader, PayloadLayout, Stage};
+use dear_proto::{flags, random_run_id, FrameHeader, PayloadLayout, Stage};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
@@ -16,6 +22,8 @@ const W: usize = 16;
 const H: usize = 12;
 /// Distinct frame contents; frame `k` carries content `k % VARIANTS`.
 const VARIANTS: u64 = 3;
+/// The test source's first frame id: ids and sequence numbers differ, so a mix-up shows.
+const FIRST_FRAME_ID: u64 = 100;
 
 /// A service name no other test (or concurrent test run) uses.
 fn unique_service(test: &str) -> String {
@@ -48,7 +56,10 @@ struct TestPublisher {
     publisher: Publisher<ipc::Service, [u8], FrameHeader>,
     notifier: Notifier<ipc::Service>,
     layout: PayloadLayout,
-    next_id: u64,
+    /// Drawn per instance, as deard does.
+    run_id: u64,
+    /// Samples sent so far = the next sample's `sequence`.
+    sent: u64,
     _frames: FrameService,
     _events: FrameEventService,
     _node: Node<ipc::Service>,
@@ -62,7 +73,7 @@ impl TestPublisher {
             .unwrap();
         let frames = frame_service(&node, service).unwrap();
         let events = frame_event_service(&node, service).unwrap();
-        let layout = PayloadLayout::new(W as u32, H as u32);
+        let layout = PayloadLayout::new(W as u32, H as u32).unwrap();
         let publisher = frames
             .publisher_builder()
             .initial_max_slice_len(layout.size)
@@ -73,17 +84,19 @@ impl TestPublisher {
             publisher,
             notifier,
             layout,
-            next_id: 0,
+            run_id: random_run_id().unwrap(),
+            sent: 0,
             _frames: frames,
             _events: events,
             _node: node,
         }
     }
 
-    /// Publishes frame `next_id` with the known content of its variant.
+    /// Publishes the next frame (sequence `sent`, frame id `FIRST_FRAME_ID + sent`) with the
+    /// known content of its variant.
     fn publish(&mut self) {
-        let id = self.next_id;
-        self.next_id += 1;
+        let sequence = self.sent;
+        let id = FIRST_FRAME_ID + sequence;
         let k = id % VARIANTS;
         let l = self.layout;
         let mut sample = self.publisher.loan_slice(l.size).unwrap();
@@ -111,9 +124,12 @@ impl TestPublisher {
         header.stage_latency_us[Stage::Total as usize] = 4_000;
         header.frames_dropped = id / 10;
         header.set_bundle_name("test");
+        header.run_id = self.run_id;
+        header.sequence = sequence;
         header.publish_timestamp_ns = dear_proto::time::monotonic_ns();
         *sample.user_header_mut() = header;
         sample.send().unwrap();
+        self.sent += 1;
         self.notifier.notify().unwrap();
     }
 
@@ -188,7 +204,8 @@ fn dump_writes_the_published_frames_as_a_capture() {
     let estimates = source["calibration_estimates"].as_array().unwrap();
     assert_eq!((published.len(), estimates.len()), (3, 3));
 
-    let mut last_daemon_id = None;
+    let run_id = format!("{:016x}", publisher.run_id);
+    let mut last_sequence = None;
     for i in 0..3 {
         let frame = capture.read_frame(i).unwrap();
         assert_eq!(frame.index, i as u64);
@@ -196,9 +213,15 @@ fn dump_writes_the_published_frames_as_a_capture() {
             frame.perturbation.is_none(),
             "estimates are not ground truth"
         );
+        // Frames may be lost (the queue overwrites), never reordered or repeated: the sequence
+        // of one run strictly increases, and each sample is the one published under it.
+        assert_eq!(published[i]["run_id"], run_id.as_str());
+        let sequence = published[i]["sequence"].as_u64().unwrap();
+        assert!(last_sequence < Some(sequence), "frames in publish order");
+        assert!(sequence < publisher.sent);
+        last_sequence = Some(sequence);
         let daemon_id = published[i]["frame_id"].as_u64().unwrap();
-        assert!(last_daemon_id < Some(daemon_id), "frames in publish order");
-        last_daemon_id = Some(daemon_id);
+        assert_eq!(daemon_id, FIRST_FRAME_ID + sequence);
         assert_eq!(published[i]["id"], i);
         assert_eq!(published[i]["bundle"], "test");
         let e = &estimates[i];
@@ -304,6 +327,7 @@ fn dump_refuses_a_non_empty_directory_before_waiting() {
 fn watch_reports_each_second_as_json() {
     let service = unique_service("watch");
     let mut publisher = TestPublisher::new(&service);
+    let started = Instant::now();
     let child = dear(&[
         "watch",
         "--service",
@@ -315,12 +339,29 @@ fn watch_reports_each_second_as_json() {
     .spawn()
     .unwrap();
     let out = publisher.serve(child, Duration::from_secs(30));
+    let test_ms = started.elapsed().as_secs_f64() * 1e3;
     check_success(&out);
     let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
     assert_eq!(lines.len(), 2);
+    // Every frame is numbered by this publisher's run; what was received plus what was lost
+    // (sequence gaps) spans consecutive samples, so it cannot exceed what was sent.
+    let run_id = format!("{:016x}", publisher.run_id);
+    let mut spanned = 0;
+    for line in &lines {
+        assert_eq!(line["publisher_restarts"], 0, "{line}");
+        if line["frames"].as_u64().unwrap() > 0 {
+            assert_eq!(line["run_id"], run_id.as_str(), "{line}");
+        }
+        spanned += line["frames"].as_u64().unwrap() + line["lost"].as_u64().unwrap();
+    }
+    assert!(
+        (1..=publisher.sent).contains(&spanned),
+        "received + lost = {spanned}, sent {}",
+        publisher.sent
+    );
     // The second line covers a full second of 20 ms frames (loaded CI: allow a wide margin).
     let last = &lines[1];
     let fps = last["fps"].as_f64().unwrap();
@@ -333,10 +374,91 @@ fn watch_reports_each_second_as_json() {
         .find(|s| s["stage"] == "flow")
         .unwrap();
     assert_eq!(flow["median_ms"], 1.5);
-    assert!(last["end_to_end"]["median_ms"].as_f64().unwrap() >= 0.0);
+    // Publication precedes receipt on the one clock both use (CLOCK_MONOTONIC), so the
+    // latency is positive: 0 is what `dear watch` shows when a publish time lies in the
+    // client's future (another clock), and must fail here. Every frame it received was
+    // published during this test, which bounds the latency from above.
+    let median = last["end_to_end"]["median_ms"].as_f64().unwrap();
+    let max = last["end_to_end"]["max_ms"].as_f64().unwrap();
+    assert!(
+        0.0 < median && median <= max,
+        "end-to-end median {median} max {max} ms"
+    );
+    assert!(
+        max < test_ms,
+        "end-to-end max {max} ms, the test took {test_ms} ms"
+    );
     assert_eq!(last["calibration"]["quality"], 0.75);
     assert_eq!(last["flags"], serde_json::json!(["aligned", "online"]));
     assert_eq!(last["bundle"], "test");
+}
+
+/// A publisher restart (a new instance: new run id, sequence and frame ids from the start)
+/// is reported by `dear watch` as one, without counting the restart as lost frames.
+#[test]
+fn watch_says_when_the_publisher_restarted() {
+    let service = unique_service("watch-restart");
+    let mut first = Some(TestPublisher::new(&service));
+    let first_run = format!("{:016x}", first.as_ref().unwrap().run_id);
+    let mut child = dear(&[
+        "watch",
+        "--service",
+        &service,
+        "--json",
+        "--count-seconds",
+        "6",
+    ])
+    .spawn()
+    .unwrap();
+    // Lines as they come, so the restart happens after watch has seen the first instance.
+    let stdout = child.stdout.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel::<serde_json::Value>();
+    let reader = std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines() {
+            let _ = tx.send(serde_json::from_str(&line.unwrap()).unwrap());
+        }
+    });
+    let mut lines = Vec::new();
+    let mut second: Option<TestPublisher> = None;
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while child.try_wait().unwrap().is_none() {
+        assert!(Instant::now() < deadline, "dear watch still running");
+        while let Ok(line) = rx.try_recv() {
+            if first.is_some() && line["run_id"] == first_run.as_str() {
+                // Seen: stop the first instance (its node and ports go), start another.
+                first = None;
+                second = Some(TestPublisher::new(&service));
+            }
+            lines.push(line);
+        }
+        match (&mut first, &mut second) {
+            (Some(p), _) | (None, Some(p)) => p.publish(),
+            (None, None) => unreachable!(),
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let status = child.wait().unwrap();
+    reader.join().unwrap();
+    lines.extend(rx.try_iter());
+    assert!(status.success(), "dear watch: {status:?}");
+    let second = second.expect("watch reported the first instance");
+    let second_run = format!("{:016x}", second.run_id);
+    let restarts: u64 = lines
+        .iter()
+        .map(|l| l["publisher_restarts"].as_u64().unwrap())
+        .sum();
+    assert_eq!(restarts, 1, "{lines:#?}");
+    let at = lines
+        .iter()
+        .position(|l| l["publisher_restarts"] == 1)
+        .unwrap();
+    assert_eq!(lines[at]["run_id"], second_run.as_str());
+    for l in &lines[at + 1..] {
+        assert!(
+            l["frames"] == 0 || l["run_id"] == second_run.as_str(),
+            "{l}"
+        );
+    }
 }
 
 #[test]

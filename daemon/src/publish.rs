@@ -2,6 +2,7 @@
 //! loaned shared-memory sample (no intermediate frame buffer), sent, and announced on the event
 //! service so subscribers wake up.
 
+use std::cell::Cell;
 use std::time::Instant;
 
 use dear_proto::service::{frame_event_service, frame_service, FrameEventService, FrameService};
@@ -20,6 +21,12 @@ pub struct FramePublisher {
     publisher: Publisher<ipc::Service, [u8], FrameHeader>,
     notifier: Notifier<ipc::Service>,
     layout: PayloadLayout,
+    /// This instance's [`FrameHeader::run_id`], drawn once in `new`.
+    run_id: u64,
+    /// The [`FrameHeader::sequence`] of the next sample sent. A `Cell`: `publish` takes
+    /// `&self`, and the publisher is used from the frame loop's thread only (iceoryx2 ports are
+    /// not `Sync` either).
+    sequence: Cell<u64>,
     // Keep the port factories alive as long as the ports.
     _frames: FrameService,
     _events: FrameEventService,
@@ -34,9 +41,10 @@ impl FramePublisher {
             .map_err(|e| format!("cannot create the iceoryx2 node: {e:?}"))?;
         let cleanup = node.try_cleanup_dead_nodes();
         tracing::info!(?cleanup, "removed stale resources of dead processes");
-        let frames = frame_service(&node, name)?;
-        let events = frame_event_service(&node, name)?;
-        let layout = PayloadLayout::new(width, height);
+        let frames = frame_service(&node, name).map_err(|e| error_chain(&e))?;
+        let events = frame_event_service(&node, name).map_err(|e| error_chain(&e))?;
+        let layout = PayloadLayout::new(width, height)
+            .map_err(|e| format!("cannot publish on {name:?}: {e}"))?;
         let publisher = frames
             .publisher_builder()
             .initial_max_slice_len(layout.size)
@@ -46,12 +54,17 @@ impl FramePublisher {
             .notifier_builder()
             .create()
             .map_err(|e| format!("cannot create a notifier on {name:?}: {e:?}"))?;
+        let run_id = dear_proto::random_run_id()
+            .map_err(|e| format!("cannot draw a run id for {name:?} (getrandom): {e}"))?;
+        tracing::info!(run_id = format_args!("{run_id:016x}"), "publisher instance");
         Ok(FramePublisher {
             name: name.to_string(),
             node,
             publisher,
             notifier,
             layout,
+            run_id,
+            sequence: Cell::new(0),
             _frames: frames,
             _events: events,
         })
@@ -61,9 +74,17 @@ impl FramePublisher {
         &self.name
     }
 
+    /// The run id stamped on every sample of this instance.
+    pub fn run_id(&self) -> u64 {
+        self.run_id
+    }
+
     /// Loans a sample, lets `fill` write the frame into it, stamps and sends it, and notifies
     /// listeners. Returns the header as sent. If `fill` fails the sample is dropped unsent and
-    /// the error returned.
+    /// the error returned. Stamps `run_id` and `sequence` (overwriting whatever `header` had):
+    /// every sent sample gets the next number, so a gap a client sees is a frame it lost. The
+    /// number is spent even if the send then fails (a gap, counted as a loss), because a
+    /// failed send may have reached some subscribers and a number must never repeat.
     pub fn publish(
         &self,
         mut header: FrameHeader,
@@ -97,6 +118,9 @@ impl FramePublisher {
         header.stage_latency_us[Stage::Publish as usize] = loan_us;
         header.stage_latency_us[Stage::Total as usize] = micros(arrived);
         header.publish_timestamp_ns = dear_proto::time::monotonic_ns();
+        header.run_id = self.run_id;
+        header.sequence = self.sequence.get();
+        self.sequence.set(header.sequence + 1);
         *sample.user_header_mut() = header;
         sample
             .send()
@@ -113,6 +137,19 @@ impl FramePublisher {
         let state = self.node.try_cleanup_dead_nodes();
         tracing::debug!(?state, "dead-node cleanup");
     }
+}
+
+/// An error and its sources as one line (`a: b: c`), for this module's `String` errors, so the
+/// iceoryx2 reason under a proto error is not lost.
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        text.push_str(": ");
+        text.push_str(&s.to_string());
+        source = s.source();
+    }
+    text
 }
 
 /// Reinterprets the depth plane as `f32`. The payload is 64-byte aligned and the depth plane

@@ -4,12 +4,20 @@ use iceoryx2::prelude::ZeroCopySend;
 
 /// `"DEAR"` read as a little-endian `u32`.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"DEAR");
-/// Bumped on any change of the header or payload layout.
-pub const FORMAT_VERSION: u32 = 1;
+/// Bumped on any change of the header or payload layout. 2: `run_id` and `sequence` were
+/// taken from `reserved` (same size, same offsets for every older field).
+pub const FORMAT_VERSION: u32 = 2;
 /// Alignment of the payload in shared memory: enough for `f32` and for SIMD loads.
 pub const PAYLOAD_ALIGNMENT: usize = 64;
 /// Bytes of the bundle name field (UTF-8, NUL-padded).
 pub const BUNDLE_NAME_LEN: usize = 32;
+/// Payload bytes per pixel: `f32` depth, three `u8` RGB, one `u8` confidence.
+pub const BYTES_PER_PIXEL: u64 = 8;
+/// The largest payload a header can describe: `payload_size` and the plane offsets are `u32`.
+pub const MAX_PAYLOAD_SIZE: u64 = u32::MAX as u64;
+
+// Every size below `MAX_PAYLOAD_SIZE` converts to `usize` without loss.
+const _: () = assert!(usize::BITS >= 32);
 
 /// Processing flags (`FrameHeader::flags`).
 pub mod flags {
@@ -24,6 +32,10 @@ pub mod flags {
     pub const CALIBRATION_ESTIMATED: u32 = 1 << 3;
     /// The calibration comes from the online estimator (otherwise: the static calibration).
     pub const CALIBRATION_ONLINE: u32 = 1 << 4;
+    /// The refinement network's output on this frame was physically implausible (non-finite,
+    /// negative, or moved far from the measurement on many pixels) and was not published: the
+    /// depth is the classical filter's (`REFINED_CLASSICAL` is set, `REFINED_NETWORK` is not).
+    pub const NETWORK_OUTPUT_REJECTED: u32 = 1 << 5;
 }
 
 /// Pipeline stages whose latency each frame reports, index into `stage_latency_us`.
@@ -125,8 +137,17 @@ pub struct FrameHeader {
     pub frames_skipped: u64,
     /// Input frames dropped because processing fell behind since the daemon started.
     pub frames_dropped: u64,
+    /// Random id the publisher drew when it started (never 0 from `deard`; 0 = the publisher
+    /// did not say). A new value means a new publisher instance: the daemon restarted, and
+    /// `frame_id`, `sequence` and the counters started again.
+    pub run_id: u64,
+    /// Samples this publisher instance sent before this one: 0, 1, 2, … with no gaps on the
+    /// publisher's side, strictly increasing within one `run_id` (unlike `frame_id`, which
+    /// restarts when a replay loops and skips over bad input). A gap seen by a client is the
+    /// number of samples it lost (overwritten in its queue because it read too slowly).
+    pub sequence: u64,
     /// Zero; room for additions without changing the size.
-    pub reserved: [u8; 24],
+    pub reserved: [u8; 8],
 }
 
 const _: () = assert!(core::mem::size_of::<FrameHeader>() == 192);
@@ -142,9 +163,25 @@ impl Default for FrameHeader {
 impl FrameHeader {
     /// A header for a `width`×`height` frame with the payload layout filled in and everything
     /// else zero / unknown.
+    ///
+    /// # Panics
+    ///
+    /// If the frame's payload is larger than the header can describe (see
+    /// [`PayloadLayout::new`]). A publisher makes its layout with `PayloadLayout::new` (which
+    /// returns the error) before it makes headers of the same size, so its calls cannot fail;
+    /// sizes from anywhere else go through [`FrameHeader::try_new`].
     pub fn new(frame_id: u64, width: u32, height: u32) -> Self {
-        let layout = PayloadLayout::new(width, height);
-        FrameHeader {
+        match Self::try_new(frame_id, width, height) {
+            Ok(header) => header,
+            Err(e) => panic!("FrameHeader::new: {e}"),
+        }
+    }
+
+    /// [`FrameHeader::new`] for a size that may be too large for the protocol.
+    pub fn try_new(frame_id: u64, width: u32, height: u32) -> Result<Self, LayoutError> {
+        let layout = PayloadLayout::new(width, height)?;
+        // The layout's sizes are at most `MAX_PAYLOAD_SIZE` = `u32::MAX`: these casts are exact.
+        Ok(FrameHeader {
             magic: MAGIC,
             version: FORMAT_VERSION,
             frame_id,
@@ -168,8 +205,10 @@ impl FrameHeader {
             payload_size: layout.size as u32,
             frames_skipped: 0,
             frames_dropped: 0,
-            reserved: [0; 24],
-        }
+            run_id: 0,
+            sequence: 0,
+            reserved: [0; 8],
+        })
     }
 
     /// The bundle name, or `""` when none.
@@ -197,48 +236,124 @@ impl FrameHeader {
         self.stage_latency_us[stage as usize]
     }
 
-    /// Checks magic, version and that the payload layout is the one this crate expects for the
-    /// frame size, so a client never reads out of bounds.
-    pub fn validate(&self, payload_len: usize) -> Result<PayloadLayout, String> {
+    /// Checks a received header against its payload before anything reads the payload: the
+    /// magic, the format version, that the frame size fits the protocol, that every plane
+    /// offset and `payload_size` are the ones [`PayloadLayout::new`] gives for `width`×`height`
+    /// (so the planes lie inside `payload_size`, in order, without overlapping), and that the
+    /// payload holds `payload_size` bytes. Never panics, whatever the header's bytes are: the
+    /// header comes from another process and may be corrupt or of another protocol version.
+    pub fn validate(&self, payload_len: usize) -> Result<PayloadLayout, HeaderError> {
         if self.magic != MAGIC {
-            return Err(format!(
-                "frame header magic is {:#010x}, expected {MAGIC:#010x}",
-                self.magic
-            ));
+            return Err(HeaderError::Magic { found: self.magic });
         }
         if self.version != FORMAT_VERSION {
-            return Err(format!(
-                "frame format version {} is not supported (this client reads {FORMAT_VERSION})",
-                self.version
-            ));
+            return Err(HeaderError::Version {
+                found: self.version,
+                supported: FORMAT_VERSION,
+            });
         }
-        let layout = PayloadLayout::new(self.width, self.height);
-        let found = (
-            self.depth_offset as usize,
-            self.rgb_offset as usize,
-            self.confidence_offset as usize,
-            self.payload_size as usize,
-        );
-        let expected = (
-            layout.depth_offset,
-            layout.rgb_offset,
-            layout.confidence_offset,
-            layout.size,
-        );
-        if found != expected {
-            return Err(format!(
-                "payload layout {found:?} does not match {expected:?} for {}x{}",
-                self.width, self.height
-            ));
+        let layout = PayloadLayout::new(self.width, self.height)?;
+        let fields = [
+            ("depth_offset", self.depth_offset, layout.depth_offset),
+            ("rgb_offset", self.rgb_offset, layout.rgb_offset),
+            (
+                "confidence_offset",
+                self.confidence_offset,
+                layout.confidence_offset,
+            ),
+            ("payload_size", self.payload_size, layout.size),
+        ];
+        for (field, found, expected) in fields {
+            // `expected` ≤ `MAX_PAYLOAD_SIZE` = `u32::MAX` (checked by `PayloadLayout::new`).
+            let expected = expected as u32;
+            if found != expected {
+                return Err(HeaderError::Layout {
+                    field,
+                    found,
+                    expected,
+                    width: self.width,
+                    height: self.height,
+                });
+            }
         }
         if payload_len < layout.size {
-            return Err(format!(
-                "payload is {payload_len} bytes, the header needs {}",
-                layout.size
-            ));
+            return Err(HeaderError::PayloadTooShort {
+                len: payload_len,
+                payload_size: layout.size,
+            });
         }
         Ok(layout)
     }
+}
+
+/// A fresh [`FrameHeader::run_id`]: 64 random bits from the kernel (`getrandom(2)`), never 0
+/// (0 means "no run id"). Random rather than a start time or a PID, both of which repeat
+/// across reboots and containers, so two runs are told apart with certainty in practice.
+pub fn random_run_id() -> std::io::Result<u64> {
+    loop {
+        let mut bytes = [0u8; 8];
+        // SAFETY: `bytes` is valid for writes of its length; flags 0 = the urandom pool, which
+        // blocks only until the kernel's pool is first initialised at boot.
+        let n = unsafe { libc::getrandom(bytes.as_mut_ptr().cast(), bytes.len(), 0) };
+        if n < 0 {
+            let e = std::io::Error::last_os_error();
+            if e.kind() == std::io::ErrorKind::Interrupted {
+                continue;
+            }
+            return Err(e);
+        }
+        // Requests of up to 256 bytes are never short once the pool is initialised; a short
+        // read would leave zero bytes, so it is simply retried.
+        let id = u64::from_le_bytes(bytes);
+        if n as usize == bytes.len() && id != 0 {
+            return Ok(id);
+        }
+    }
+}
+
+/// Why a received [`FrameHeader`] was refused ([`FrameHeader::validate`]). Every message names
+/// the header field that is wrong, in backticks, with the value found and the one expected.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum HeaderError {
+    #[error(
+        "`magic` is {found:#010x}, expected {MAGIC:#010x} (\"DEAR\"): not a DEAR frame header"
+    )]
+    Magic { found: u32 },
+    /// A header of another protocol version: its fields may mean something else, so none is
+    /// read. The message names both versions so the user knows which side to upgrade.
+    #[error(
+        "`version` is {found}: the publisher speaks frame format version {found}, this client \
+         reads version {supported} only (update the older of the two)"
+    )]
+    Version { found: u32, supported: u32 },
+    /// `width`×`height` needs a payload larger than the header can describe.
+    #[error(transparent)]
+    Size(#[from] LayoutError),
+    /// A plane offset or `payload_size` differs from the layout of the frame's size.
+    #[error("`{field}` is {found}, but a {width}×{height} frame has {expected}")]
+    Layout {
+        field: &'static str,
+        found: u32,
+        expected: u32,
+        width: u32,
+        height: u32,
+    },
+    /// The sample's payload is shorter than the header's `payload_size`.
+    #[error("`payload_size` is {payload_size} bytes, but the sample's payload has only {len}")]
+    PayloadTooShort { len: usize, payload_size: usize },
+}
+
+/// A frame size whose payload the header cannot describe: more than [`MAX_PAYLOAD_SIZE`] bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "`width`×`height` is {width}×{height}: {pixels} pixels need {BYTES_PER_PIXEL} bytes each, \
+     more than the {MAX_PAYLOAD_SIZE} bytes a frame's payload may have (`payload_size` is a u32)"
+)]
+pub struct LayoutError {
+    pub width: u32,
+    pub height: u32,
+    /// `width·height` (cannot overflow: both are below 2³²).
+    pub pixels: u64,
 }
 
 /// Where each plane of a frame lies in the payload: depth (`f32`), then RGB (`u8`×3), then
@@ -254,20 +369,35 @@ pub struct PayloadLayout {
 }
 
 impl PayloadLayout {
-    pub fn new(width: u32, height: u32) -> Self {
-        let (width, height) = (width as usize, height as usize);
-        let pixels = width * height;
+    /// The layout of a `width`×`height` frame. Checked: a size whose payload exceeds
+    /// [`MAX_PAYLOAD_SIZE`] is an error, never an overflow, since the size may come from a
+    /// received (possibly corrupt) header or an input file.
+    pub fn new(width: u32, height: u32) -> Result<Self, LayoutError> {
+        // Below 2³² each, so the product fits a u64; the byte count may not, hence checked_mul.
+        let pixels = u64::from(width) * u64::from(height);
+        let too_large = LayoutError {
+            width,
+            height,
+            pixels,
+        };
+        let size = pixels
+            .checked_mul(BYTES_PER_PIXEL)
+            .filter(|&size| size <= MAX_PAYLOAD_SIZE)
+            .ok_or(too_large)?;
+        // From here every value is at most `size` ≤ u32::MAX, which fits a usize (asserted
+        // above): plain arithmetic cannot overflow.
+        let pixels = pixels as usize;
         let depth_offset = 0;
         let rgb_offset = depth_offset + 4 * pixels;
         let confidence_offset = rgb_offset + 3 * pixels;
-        PayloadLayout {
-            width,
-            height,
+        Ok(PayloadLayout {
+            width: width as usize,
+            height: height as usize,
             depth_offset,
             rgb_offset,
             confidence_offset,
-            size: confidence_offset + pixels,
-        }
+            size: size as usize,
+        })
     }
 
     pub fn pixels(&self) -> usize {

@@ -17,8 +17,12 @@ pub mod header;
 pub mod service;
 pub mod time;
 
-pub use header::{flags, FrameHeader, PayloadLayout, Stage, FORMAT_VERSION, MAGIC};
+pub use header::{
+    flags, random_run_id, FrameHeader, HeaderError, LayoutError, PayloadLayout, Stage,
+    FORMAT_VERSION, MAGIC,
+};
 pub use service::{
     default_service_name, frame_event_service, frame_service, validate_service_name,
-    FrameEventService, FrameService, DEFAULT_CAMERA,
+    EventServiceError, FrameEventService, FrameService, FrameServiceError, ServiceNameError,
+    DEFAULT_CAMERA,
 };

@@ -10,6 +10,8 @@
 //! blocks the daemon or other subscribers. Live depth is worth more fresh than complete.
 
 use iceoryx2::prelude::*;
+use iceoryx2::service::builder::event::EventOpenOrCreateError;
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use crate::header::{FrameHeader, PAYLOAD_ALIGNMENT};
@@ -37,20 +39,80 @@ pub fn default_service_name(camera: &str) -> String {
     format!("dear/{camera}/frames")
 }
 
+/// Why a service name was refused ([`validate_service_name`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ServiceNameError {
+    #[error("service name {name:?} must be 1 to 200 characters")]
+    Length { name: String },
+    #[error("service name {name:?} contains {found:?}; use letters, digits and / _ - .")]
+    Character { name: String, found: char },
+    /// Passed our rules but not iceoryx2's (kept as a source so a future iceoryx2 rule is
+    /// reported, not swallowed).
+    #[error("service name {name:?} is not accepted by iceoryx2")]
+    Iceoryx {
+        name: String,
+        #[source]
+        source: ServiceNameRejected,
+    },
+}
+
+/// iceoryx2's own service-name error.
+pub type ServiceNameRejected = iceoryx2::service::service_name::ServiceNameError;
+
+/// Why the frame service could not be opened or created ([`frame_service`]).
+#[derive(Debug, thiserror::Error)]
+pub enum FrameServiceError {
+    #[error(transparent)]
+    Name(#[from] ServiceNameError),
+    /// Typically: the service exists with other QoS or another header type (a client or
+    /// daemon of another protocol version), or the shared memory is not accessible.
+    #[error("cannot open or create the frame service {name:?}")]
+    OpenOrCreate {
+        name: String,
+        #[source]
+        source: PublishSubscribeOpenOrCreateError,
+    },
+}
+
+/// Why the event service could not be opened or created ([`frame_event_service`]).
+#[derive(Debug, thiserror::Error)]
+pub enum EventServiceError {
+    #[error(transparent)]
+    Name(#[from] ServiceNameError),
+    #[error("cannot open or create the event service {name:?}")]
+    OpenOrCreate {
+        name: String,
+        #[source]
+        source: EventOpenOrCreateError,
+    },
+}
+
 /// Checks a service name: non-empty, at most 200 bytes, ASCII letters, digits and `/_-.`.
-pub fn validate_service_name(name: &str) -> Result<(), String> {
+pub fn validate_service_name(name: &str) -> Result<(), ServiceNameError> {
     if name.is_empty() || name.len() > 200 {
-        return Err(format!("service name {name:?} must be 1 to 200 characters"));
+        return Err(ServiceNameError::Length {
+            name: name.to_string(),
+        });
     }
-    if let Some(c) = name
+    if let Some(found) = name
         .chars()
         .find(|c| !(c.is_ascii_alphanumeric() || "/_-.".contains(*c)))
     {
-        return Err(format!(
-            "service name {name:?} contains {c:?}; use letters, digits and / _ - ."
-        ));
+        return Err(ServiceNameError::Character {
+            name: name.to_string(),
+            found,
+        });
     }
     Ok(())
+}
+
+/// The iceoryx2 name of a valid service name.
+fn service_name(name: &str) -> Result<ServiceName, ServiceNameError> {
+    validate_service_name(name)?;
+    name.try_into().map_err(|source| ServiceNameError::Iceoryx {
+        name: name.to_string(),
+        source,
+    })
 }
 
 /// The publish-subscribe port factory of the frame service.
@@ -59,11 +121,11 @@ pub type FrameService = publish_subscribe::PortFactory<ipc::Service, [u8], Frame
 pub type FrameEventService = event::PortFactory<ipc::Service>;
 
 /// Opens (or creates) the frame service `name` with the protocol's QoS.
-pub fn frame_service(node: &Node<ipc::Service>, name: &str) -> Result<FrameService, String> {
-    validate_service_name(name)?;
-    let service_name: ServiceName = name
-        .try_into()
-        .map_err(|e| format!("service name {name:?}: {e:?}"))?;
+pub fn frame_service(
+    node: &Node<ipc::Service>,
+    name: &str,
+) -> Result<FrameService, FrameServiceError> {
+    let service_name = service_name(name)?;
     node.service_builder(&service_name)
         .publish_subscribe::<[u8]>()
         .user_header::<FrameHeader>()
@@ -76,23 +138,26 @@ pub fn frame_service(node: &Node<ipc::Service>, name: &str) -> Result<FrameServi
         .max_publishers(QOS_MAX_PUBLISHERS)
         .max_nodes(QOS_MAX_NODES)
         .open_or_create()
-        .map_err(|e| format!("cannot open or create the frame service {name:?}: {e:?}"))
+        .map_err(|source| FrameServiceError::OpenOrCreate {
+            name: name.to_string(),
+            source,
+        })
 }
 
 /// Opens (or creates) the event service that announces each new frame of `name`.
 pub fn frame_event_service(
     node: &Node<ipc::Service>,
     name: &str,
-) -> Result<FrameEventService, String> {
-    validate_service_name(name)?;
-    let service_name: ServiceName = name
-        .try_into()
-        .map_err(|e| format!("service name {name:?}: {e:?}"))?;
+) -> Result<FrameEventService, EventServiceError> {
+    let service_name = service_name(name)?;
     node.service_builder(&service_name)
         .event()
         .max_listeners(QOS_MAX_SUBSCRIBERS)
         .max_notifiers(QOS_MAX_PUBLISHERS)
         .max_nodes(QOS_MAX_NODES)
         .open_or_create()
-        .map_err(|e| format!("cannot open or create the event service {name:?}: {e:?}"))
+        .map_err(|source| EventServiceError::OpenOrCreate {
+            name: name.to_string(),
+            source,
+        })
 }

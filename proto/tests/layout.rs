@@ -4,7 +4,7 @@
 
 use std::mem::{offset_of, size_of};
 
-use dear_proto::{FrameHeader, PayloadLayout};
+use dear_proto::{random_run_id, FrameHeader, HeaderError, PayloadLayout, FORMAT_VERSION};
 
 /// `(field, offset, size)` of the real struct.
 fn real_fields() -> Vec<(&'static str, usize, usize)> {
@@ -42,6 +42,8 @@ fn real_fields() -> Vec<(&'static str, usize, usize)> {
         field!(payload_size),
         field!(frames_skipped),
         field!(frames_dropped),
+        field!(run_id),
+        field!(sequence),
         field!(reserved),
     ]
 }
@@ -110,19 +112,98 @@ fn fields_are_contiguous_without_padding() {
     }
 }
 
+/// Offsets of the version-2 fields, fixed by the protocol: a client in another language reads
+/// them at these bytes, so moving them is a format change (and a `FORMAT_VERSION` bump).
+#[test]
+fn version_2_fields_sit_where_reserved_was() {
+    assert_eq!(FORMAT_VERSION, 2);
+    assert_eq!(
+        offset_of!(FrameHeader, frames_dropped),
+        160,
+        "older fields unmoved"
+    );
+    assert_eq!(offset_of!(FrameHeader, run_id), 168);
+    assert_eq!(offset_of!(FrameHeader, sequence), 176);
+    assert_eq!(offset_of!(FrameHeader, reserved), 184);
+    assert_eq!(size_of::<FrameHeader>(), 192, "the header keeps its size");
+    let h = FrameHeader::new(7, 4, 3);
+    assert_eq!((h.run_id, h.sequence, h.reserved), (0, 0, [0; 8]));
+}
+
 #[test]
 fn payload_layout_of_vga() {
-    let l = PayloadLayout::new(640, 480);
+    let l = PayloadLayout::new(640, 480).unwrap();
     assert_eq!(
         (l.depth_offset, l.rgb_offset, l.confidence_offset, l.size),
         (0, 1_228_800, 2_150_400, 2_457_600)
     );
     let h = FrameHeader::new(1, 640, 480);
-    assert!(h.validate(l.size).is_ok());
-    assert!(h.validate(l.size - 1).is_err());
+    assert_eq!(h.validate(l.size), Ok(l));
+    assert_eq!(
+        h.validate(l.size - 1),
+        Err(HeaderError::PayloadTooShort {
+            len: l.size - 1,
+            payload_size: l.size
+        })
+    );
     let mut bad = h;
     bad.magic = 0;
-    assert!(bad.validate(l.size).unwrap_err().contains("magic"));
+    assert!(bad
+        .validate(l.size)
+        .unwrap_err()
+        .to_string()
+        .contains("`magic`"));
+}
+
+/// The largest frames the u32 `payload_size` can describe are accepted, one pixel more is a
+/// typed error naming the size: never an overflow, whatever `width` and `height` are.
+#[test]
+fn payload_size_limit_is_exact_and_checked() {
+    // 8 · 536_870_911 = 4_294_967_288 ≤ u32::MAX; 8 · 536_870_912 = 2³² > u32::MAX.
+    let largest = PayloadLayout::new(536_870_911, 1).unwrap();
+    assert_eq!(largest.size, 4_294_967_288);
+    assert_eq!(largest.confidence_offset, 7 * 536_870_911);
+    let err = PayloadLayout::new(536_870_912, 1).unwrap_err();
+    assert_eq!(err.pixels, 536_870_912);
+    let msg = err.to_string();
+    assert!(
+        msg.contains("536870912×1") && msg.contains("`payload_size`"),
+        "{msg}"
+    );
+    // Products that overflow a u64 once multiplied by 8, and the extreme.
+    for (w, h) in [(u32::MAX, u32::MAX), (1 << 31, 1 << 30), (65_536, 65_536)] {
+        let err = PayloadLayout::new(w, h).unwrap_err();
+        assert_eq!(err.pixels, u64::from(w) * u64::from(h));
+        assert!(FrameHeader::try_new(0, w, h).is_err());
+    }
+}
+
+#[test]
+fn another_format_version_is_refused_naming_both_versions() {
+    let mut h = FrameHeader::new(1, 4, 3);
+    h.version = 1;
+    let err = h.validate(96).unwrap_err();
+    assert_eq!(
+        err,
+        HeaderError::Version {
+            found: 1,
+            supported: 2
+        }
+    );
+    let msg = err.to_string();
+    assert!(
+        msg.contains("version 1") && msg.contains("version 2"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn run_ids_are_random_and_never_zero() {
+    let ids: Vec<u64> = (0..64).map(|_| random_run_id().unwrap()).collect();
+    assert!(ids.iter().all(|&id| id != 0));
+    let distinct: std::collections::HashSet<_> = ids.iter().collect();
+    // Equal 64-bit random values would mean the source is not random (p ≈ 1e-16).
+    assert_eq!(distinct.len(), ids.len(), "{ids:?}");
 }
 
 #[test]

@@ -33,7 +33,7 @@ pub fn expected_payload_hashes(
     let calibration = capture.manifest().initial_calibration;
     let mut processor =
         Processor::from_config(w, h, calibration, pipeline).expect("the pipeline configuration");
-    let layout = PayloadLayout::new(w, h);
+    let layout = PayloadLayout::new(w, h).expect("the test capture fits the frame protocol");
     let mut hashes = BTreeMap::new();
     for position in 0..capture.len() {
         let Ok(frame) = capture.read_frame(position) else {

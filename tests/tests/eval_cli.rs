@@ -109,9 +109,26 @@ fn eval_measures_baselines_and_a_bundle_and_writes_json_markdown_and_figures() {
     // (plus millimetre quantisation); a wrong pixel pairing or unit would be far off.
     let raw = row("raw-tof")["mae_all_cm"].as_f64().unwrap();
     assert!((0.55..0.75).contains(&raw), "raw ToF MAE {raw} cm");
-    // The bundle's chain produced flows, scored against the zero ground-truth flow.
-    assert!(row("smoke-edge")["aepe_px"].as_f64().is_some());
-    assert!(row("smoke-edge")["aepe_rough_px"].as_f64().is_some());
+    // The bundle's chain produced flows, scored against the zero ground-truth flow: an AEPE is
+    // a mean of end-point distances (finite, not negative), and the row's value is the mean of
+    // the per-frame values `--online` writes to tracking.csv (4 decimals) for the same flows.
+    let tracking = std::fs::read_to_string(out.join("tracking.csv")).unwrap();
+    let per_frame: Vec<f64> = tracking
+        .lines()
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|cells| cells[1] == "smoke-edge") // frame,method,aepe_px,flow_network
+        .map(|cells| cells[2].parse().unwrap())
+        .collect();
+    assert_eq!(per_frame.len(), 3, "{tracking}");
+    let mean = per_frame.iter().sum::<f64>() / 3.0;
+    let aepe = row("smoke-edge")["aepe_px"].as_f64().unwrap();
+    assert!(aepe.is_finite() && aepe >= 0.0, "AEPE {aepe}");
+    assert!(
+        (aepe - mean).abs() <= 5e-5 + 1e-9,
+        "AEPE {aepe}, per-frame mean {mean}"
+    );
+    let rough = row("smoke-edge")["aepe_rough_px"].as_f64().unwrap();
+    assert!(rough.is_finite() && rough >= 0.0, "rough AEPE {rough}");
     // The true calibration of an aligned capture is the identity: no flow error.
     let oracle = row("oracle-calibration")["aepe_px"].as_f64().unwrap();
     assert!(oracle < 1e-3, "oracle AEPE {oracle}");
@@ -121,7 +138,6 @@ fn eval_measures_baselines_and_a_bundle_and_writes_json_markdown_and_figures() {
     // method with a flow.
     let network_runs = json["online_network_frames"][0][1].as_u64().unwrap();
     assert!((1..=3).contains(&network_runs), "{network_runs}");
-    let tracking = std::fs::read_to_string(out.join("tracking.csv")).unwrap();
     assert!(tracking.starts_with("frame,method,aepe_px,flow_network\n"));
     assert_eq!(
         tracking.matches(",smoke-edge online,").count(),

@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context};
 use clap::Args;
 use dear_client::save::{auto_depth_range, save_depth_colorized, save_rgb_depth_blend};
-use dear_client::{Client, ClientError, Frame};
+use dear_client::{Client, Frame, ReceiveError};
 use dear_pipeline::capture::layout::MANIFEST_FILE;
 use dear_pipeline::capture::{CaptureManifest, CaptureWriter, Intrinsics};
 use dear_pipeline::frame::RgbdFrame;
@@ -213,8 +213,8 @@ fn next_frame(
         match client.wait(left.min(POLL)) {
             Ok(Some(frame)) => return Ok(Some(frame)),
             Ok(None) => {}
-            Err(ClientError::BadFrame { service, message }) => {
-                tracing::warn!(%service, %message, "skipping a malformed frame");
+            Err(ReceiveError::BadFrame { service, source }) => {
+                tracing::warn!(%service, error = %source, "skipping a malformed frame");
             }
             Err(_) if stop.is_set() => return Ok(None),
             Err(e) => return Err(e.into()),
@@ -334,6 +334,10 @@ impl Dump {
         }));
         self.published.push(json!({
             "id": id,
+            // Which publisher instance sent the frame and its number within that instance:
+            // `frame_id` alone repeats when a replay loops or the daemon restarts.
+            "run_id": format!("{:016x}", header.run_id),
+            "sequence": header.sequence,
             "frame_id": header.frame_id,
             "capture_timestamp_ns": header.capture_timestamp_ns,
             "publish_timestamp_ns": header.publish_timestamp_ns,

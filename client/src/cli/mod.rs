@@ -106,7 +106,7 @@ pub fn default_service() -> String {
 }
 
 /// Checks a service name given on the command line (clap value parser).
-pub fn parse_service(name: &str) -> Result<String, String> {
+pub fn parse_service(name: &str) -> Result<String, dear_proto::ServiceNameError> {
     dear_proto::validate_service_name(name)?;
     Ok(name.to_string())
 }

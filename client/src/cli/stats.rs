@@ -18,8 +18,16 @@ pub struct Window {
     stages: [Vec<u32>; Stage::ALL.len()],
     rejected: u64,
     last: Option<FrameHeader>,
-    /// `(skipped, dropped)` of the last frame of the previous report, for the per-second delta.
-    previous_counters: Option<(u64, u64)>,
+    /// `(run_id, skipped, dropped)` of the last frame of the previous report, for the
+    /// per-second delta.
+    previous_counters: Option<(u64, u64, u64)>,
+    /// `(run_id, sequence)` of the newest frame received, across reports: the next frame's
+    /// sequence gap is what this client lost.
+    last_sample: Option<(u64, u64)>,
+    /// Frames lost in the window (gaps in `sequence`).
+    lost: u64,
+    /// New run ids seen in the window: publisher restarts.
+    restarts: u64,
 }
 
 /// A latency distribution over one second, milliseconds.
@@ -78,6 +86,15 @@ pub struct Report {
     pub dropped_in_window: u64,
     /// Frames the client received but rejected as malformed.
     pub rejected: u64,
+    /// `run_id` of the newest frame, hex; `None` when no frame came or its publisher gave
+    /// none (0).
+    pub run_id: Option<String>,
+    /// Frames this client lost in the window: gaps in `sequence` (its queue overwrote them
+    /// because it read too slowly). 0 when the publisher stamps no run id.
+    pub lost: u64,
+    /// Times the run id changed in the window: the publisher restarted (its `frame_id`,
+    /// `sequence` and counters started again).
+    pub publisher_restarts: u64,
 }
 
 impl Window {
@@ -93,7 +110,27 @@ impl Window {
                 self.stages[stage as usize].push(us);
             }
         }
+        self.track_sequence(header);
         self.last = Some(*header);
+    }
+
+    /// Counts lost frames and restarts from `(run_id, sequence)`. A publisher's sequence has
+    /// no gaps on its side, so a gap of `n` is `n` frames this client never got. A run id of 0
+    /// means the publisher numbers nothing: no loss can be counted.
+    fn track_sequence(&mut self, header: &FrameHeader) {
+        if header.run_id == 0 {
+            return;
+        }
+        match self.last_sample {
+            Some((run, seq)) if run == header.run_id => {
+                // Within a run the sequence only increases; a repeat or step back (which the
+                // protocol rules out) is not counted as a loss.
+                self.lost += header.sequence.saturating_sub(seq).saturating_sub(1);
+            }
+            Some(_) => self.restarts += 1,
+            None => {}
+        }
+        self.last_sample = Some((header.run_id, header.sequence));
     }
 
     /// Counts a frame that arrived but failed validation.
@@ -130,10 +167,14 @@ impl Window {
             })
             .collect();
         let last = self.last.take();
-        let counters = last.map(|h| (h.frames_skipped, h.frames_dropped));
+        let counters = last.map(|h| (h.run_id, h.frames_skipped, h.frames_dropped));
         let (skipped_in_window, dropped_in_window) = match (self.previous_counters, counters) {
-            // Saturating: a restarted daemon starts its totals again from 0.
-            (Some((s0, d0)), Some((s1, d1))) => (s1.saturating_sub(s0), d1.saturating_sub(d0)),
+            // A restarted publisher (new run id) counts from 0 again: all of its totals are new.
+            (Some((r0, _, _)), Some((r1, s1, d1))) if r0 != r1 => (s1, d1),
+            // Saturating: a publisher without run ids may restart unseen.
+            (Some((_, s0, d0)), Some((_, s1, d1))) => {
+                (s1.saturating_sub(s0), d1.saturating_sub(d0))
+            }
             _ => (0, 0),
         };
         if counters.is_some() {
@@ -159,15 +200,22 @@ impl Window {
             bundle: last
                 .map(|h| h.bundle_name().to_string())
                 .filter(|b| !b.is_empty()),
-            frames_skipped: counters.map(|c| c.0),
-            frames_dropped: counters.map(|c| c.1),
+            frames_skipped: counters.map(|c| c.1),
+            frames_dropped: counters.map(|c| c.2),
             skipped_in_window,
             dropped_in_window,
             rejected: self.rejected,
+            run_id: last
+                .filter(|h| h.run_id != 0)
+                .map(|h| format!("{:016x}", h.run_id)),
+            lost: self.lost,
+            publisher_restarts: self.restarts,
         };
         self.end_to_end_ns.clear();
         self.stages.iter_mut().for_each(Vec::clear);
         self.rejected = 0;
+        self.lost = 0;
+        self.restarts = 0;
         report
     }
 }
@@ -225,6 +273,11 @@ impl fmt::Display for Report {
             }
             return Ok(());
         }
+        if self.publisher_restarts > 0 {
+            // First on the line: the ids and totals after it started again.
+            let run = self.run_id.as_deref().unwrap_or("?");
+            write!(f, "publisher restarted (run {run}) | ")?;
+        }
         if let Some(id) = self.frame_id {
             write!(f, "#{id} ")?;
         }
@@ -268,6 +321,9 @@ impl fmt::Display for Report {
             self.frames_dropped.unwrap_or(0),
             self.dropped_in_window
         )?;
+        if self.run_id.is_some() {
+            write!(f, " | lost {}", self.lost)?;
+        }
         if self.rejected > 0 {
             write!(f, " | rejected {}", self.rejected)?;
         }
@@ -392,6 +448,61 @@ mod tests {
         c2.frames_dropped = 10;
         w.push(&c2, 0);
         assert_eq!(w.report(Duration::from_secs(1)).dropped_in_window, 1);
+    }
+
+    fn numbered(run_id: u64, sequence: u64, dropped: u64) -> FrameHeader {
+        let mut h = header(sequence, 0, 1, 0);
+        h.run_id = run_id;
+        h.sequence = sequence;
+        h.frames_dropped = dropped;
+        h
+    }
+
+    #[test]
+    fn sequence_gaps_are_lost_frames_and_a_new_run_id_is_a_restart() {
+        let mut w = Window::default();
+        // Joining at sequence 10 loses nothing; 11 → 14 lost 12 and 13; 14 → 20 lost 5.
+        for seq in [10, 11, 14, 20] {
+            w.push(&numbered(0xabc, seq, 4), 0);
+        }
+        let r = w.report(Duration::from_secs(1));
+        assert_eq!((r.lost, r.publisher_restarts), (7, 0));
+        assert_eq!(r.run_id.as_deref(), Some("0000000000000abc"));
+        assert!(r.to_string().ends_with("| lost 7"), "{r}");
+        // Across a report: 20 → 21 is no loss. Then the publisher restarts (new run id,
+        // sequence and counters from 0): no loss is counted across the restart, and its
+        // dropped total is all new.
+        w.push(&numbered(0xabc, 21, 6), 0);
+        w.push(&numbered(0xdef, 0, 0), 0);
+        w.push(&numbered(0xdef, 2, 1), 0);
+        let r = w.report(Duration::from_secs(1));
+        assert_eq!((r.lost, r.publisher_restarts), (1, 1));
+        assert_eq!(r.dropped_in_window, 1, "the new run's own total");
+        let line = r.to_string();
+        assert!(
+            line.starts_with("publisher restarted (run 0000000000000def) | #2 "),
+            "{line}"
+        );
+        assert!(line.ends_with("| lost 1"), "{line}");
+        // The next window, same run: no restart, the dropped delta is against the new run.
+        w.push(&numbered(0xdef, 3, 3), 0);
+        let r = w.report(Duration::from_secs(1));
+        assert_eq!(
+            (r.lost, r.publisher_restarts, r.dropped_in_window),
+            (0, 0, 2)
+        );
+        assert!(!r.to_string().contains("restarted"));
+    }
+
+    #[test]
+    fn without_a_run_id_nothing_is_counted_as_lost() {
+        let mut w = Window::default();
+        for id in [1, 5, 9] {
+            w.push(&header(id, 0, 1, 0), 0);
+        }
+        let r = w.report(Duration::from_secs(1));
+        assert_eq!((r.lost, r.publisher_restarts, r.run_id.as_deref()), (0, 0, None));
+        assert!(!r.to_string().contains("lost"), "{r}");
     }
 
     #[test]

@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::Args;
-use dear_client::{Client, ClientError};
+use dear_client::{Client, ReceiveError};
 
 use super::stats::Window;
 use super::StopFlag;
@@ -45,8 +45,8 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
                 window.push(frame.header(), received);
             }
             Ok(None) => {}
-            Err(ClientError::BadFrame { message, .. }) => {
-                tracing::debug!(%message, "frame rejected");
+            Err(ReceiveError::BadFrame { source, .. }) => {
+                tracing::debug!(error = %source, "frame rejected");
                 window.reject();
             }
             // Ctrl-C interrupts the wait; that is a stop, not a failure.

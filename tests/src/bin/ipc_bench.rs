@@ -125,8 +125,9 @@ fn publisher(args: &Args) {
         let _ = c.wait();
     }
     let (median, p99) = percentiles(&all);
-    let mib =
-        dear_proto::PayloadLayout::new(args.width, args.height).size as f64 / (1 << 20) as f64;
+    let layout = dear_proto::PayloadLayout::new(args.width, args.height)
+        .expect("FramePublisher::new accepted this size");
+    let mib = layout.size as f64 / (1 << 20) as f64;
     println!(
         "{} subscriber(s), {}x{} frame ({mib:.2} MiB payload), event-driven: median {median:.1} µs, p99 {p99:.1} µs over {} receptions",
         args.subscribers,
