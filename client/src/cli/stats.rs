@@ -501,7 +501,10 @@ mod tests {
             w.push(&header(id, 0, 1, 0), 0);
         }
         let r = w.report(Duration::from_secs(1));
-        assert_eq!((r.lost, r.publisher_restarts, r.run_id.as_deref()), (0, 0, None));
+        assert_eq!(
+            (r.lost, r.publisher_restarts, r.run_id.as_deref()),
+            (0, 0, None)
+        );
         assert!(!r.to_string().contains("lost"), "{r}");
     }
 
