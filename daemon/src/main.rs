@@ -156,9 +156,12 @@ fn main() -> ExitCode {
     }
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(&config.runtime.log));
+    // Colour only on a terminal: under systemd the log goes to the journal, in tests to a file,
+    // and escape codes there break every `grep key=value`.
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     // iceoryx2 warns on every start that it uses its built-in defaults (we ship no iceoryx2
     // config file on purpose); keep its own log to errors unless IOX2_LOG_LEVEL says otherwise.

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use dear_pipeline::align::StaticAligner;
 use dear_pipeline::dear::{
-    BackgroundCalibrator, ChainInput, ChainMode, ChainOutput, DearChain, Submit,
+    BackgroundCalibrator, ChainInput, ChainMode, ChainOutput, DearChain, RefinementCheck, Submit,
 };
 use dear_pipeline::filter::ClassicalRefiner;
 use dear_pipeline::geometry::LsqError;
@@ -49,7 +49,61 @@ enum Engine {
         /// Online mode with `online_network = "background"`: the network frames' worker.
         background: Option<BackgroundCalibrator<NetworkTicket>>,
         bundle_name: String,
+        health: NetworkHealth,
     },
+}
+
+/// Consecutive frames whose refinement the output guard rejected before the network is
+/// reported as broken (one bad frame can be a freak input; ten in a row is the model).
+const BROKEN_NETWORK_FRAMES: u32 = 10;
+
+/// The refinement network's output as the chain's output guard judged it, over the stream.
+#[derive(Debug, Default)]
+struct NetworkHealth {
+    /// Frames published with the classical filter because the network's output was rejected.
+    rejected_total: u64,
+    /// Rejected frames in a row, up to the current one.
+    consecutive: u32,
+}
+
+impl NetworkHealth {
+    /// Logs the first rejection of a run of them, the point where the run says the network is
+    /// broken, and the recovery; every frame is counted.
+    fn record(&mut self, frame: u64, bundle: &str, rejected: Option<&RefinementCheck>) {
+        match rejected {
+            Some(check) => {
+                self.rejected_total += 1;
+                self.consecutive += 1;
+                if self.consecutive == 1 {
+                    tracing::warn!(
+                        frame,
+                        bundle,
+                        "refinement network output rejected ({check}); the frame is published \
+                         refined by the classical filter"
+                    );
+                } else if self.consecutive == BROKEN_NETWORK_FRAMES {
+                    tracing::error!(
+                        frame,
+                        bundle,
+                        rejected_total = self.rejected_total,
+                        "the refinement network's output was implausible on {BROKEN_NETWORK_FRAMES} \
+                         frames in a row ({check}): the bundle looks broken; frames are refined \
+                         by the classical filter until its output is plausible again"
+                    );
+                }
+            }
+            None if self.consecutive > 0 => {
+                tracing::info!(
+                    frame,
+                    bundle,
+                    after_frames = self.consecutive,
+                    "refinement network output plausible again"
+                );
+                self.consecutive = 0;
+            }
+            None => {}
+        }
+    }
 }
 
 /// Per-stream processing state (scratch buffers sized for the stream).
@@ -141,8 +195,18 @@ impl Processor {
                 online,
                 background,
                 bundle_name,
+                health: NetworkHealth::default(),
             },
         })
+    }
+
+    /// Frames whose network refinement the output guard rejected since start (published with
+    /// the classical filter, flagged `NETWORK_OUTPUT_REJECTED`); 0 without networks.
+    pub fn network_output_rejected(&self) -> u64 {
+        match &self.engine {
+            Engine::Dear { health, .. } => health.rejected_total,
+            Engine::Static { .. } => 0,
+        }
     }
 
     /// The static calibration.
@@ -222,6 +286,7 @@ impl Processor {
                 online,
                 background,
                 bundle_name,
+                health,
             } => {
                 let input = ChainInput {
                     rgb: frame.rgb.view(),
@@ -267,7 +332,17 @@ impl Processor {
                 // This frame's network measurement: inline, or delivered by the worker.
                 let network_measurement = report.measurement.as_ref().or(delivered.as_ref());
                 let fit = network_measurement.and_then(|m| m.as_ref().ok()).copied();
-                header.flags = flags::ALIGNED | flags::REFINED_NETWORK;
+                header.flags = match &report.rejected_refinement {
+                    None => flags::ALIGNED | flags::REFINED_NETWORK,
+                    Some(_) => {
+                        flags::ALIGNED | flags::REFINED_CLASSICAL | flags::NETWORK_OUTPUT_REJECTED
+                    }
+                };
+                health.record(
+                    frame.index,
+                    bundle_name,
+                    report.rejected_refinement.as_ref(),
+                );
                 if report.ran_flow_network || delivered.is_some() {
                     header.flags |= flags::CALIBRATION_ESTIMATED;
                 }

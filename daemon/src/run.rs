@@ -120,6 +120,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
                     published = stats.published,
                     skipped = stats.skipped,
                     dropped = queue.dropped(),
+                    network_rejected = processor.network_output_rejected(),
                     "{report}"
                 );
             }
@@ -135,6 +136,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
         published = stats.published,
         skipped = stats.skipped,
         dropped = stats.dropped,
+        network_rejected = processor.network_output_rejected(),
         uptime_s = stats.uptime_s(),
         "stopped"
     );

@@ -1,6 +1,7 @@
-//! Helpers of the end-to-end tests: analytic test captures, the expected pipeline output of a
-//! frame, and process handling for `deard` and the probe client.
+//! Helpers of the end-to-end tests: analytic test captures, test bundles, the expected pipeline
+//! output of a frame, and process handling for `deard` and the probe client.
 
+pub mod bundles;
 pub mod processes;
 pub mod scene;
 

@@ -23,6 +23,7 @@ use ndarray::{Array2, ArrayView2, ArrayView3, ArrayViewMut2, Zip};
 use crate::align::StaticAligner;
 use crate::calibration::Calibration;
 use crate::dear::confidence::confidence_into;
+use crate::dear::output_guard::{OutputGuard, RefinementCheck};
 use crate::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
 use crate::direct::{estimate_calibration_direct, DirectFitParams};
 use crate::filter::ClassicalRefiner;
@@ -90,6 +91,10 @@ pub struct ChainOptions {
     pub shift_search_px: usize,
     /// tract execution.
     pub runner: RunnerOptions,
+    /// Checks the refinement network's output against physics; a frame it rejects is refined
+    /// by the classical filter instead ([`ChainReport::rejected_refinement`]). `None` publishes
+    /// whatever the network outputs (tests of the raw network only).
+    pub output_guard: Option<OutputGuard>,
 }
 
 impl Default for ChainOptions {
@@ -105,6 +110,7 @@ impl Default for ChainOptions {
             alignment_check: true,
             shift_search_px: 3,
             runner: RunnerOptions::default(),
+            output_guard: Some(OutputGuard::default()),
         }
     }
 }
@@ -188,6 +194,9 @@ pub struct ChainReport {
     /// Edge alignment between RGB and the warped amplitude (see [`EdgeCheck`]): the online
     /// estimator's trigger signal and its principal-point tracker.
     pub alignment: Option<EdgeAlignment>,
+    /// `Some` when the output guard rejected the refinement network's output on this frame:
+    /// the published depth and confidence are then the classical filter's.
+    pub rejected_refinement: Option<RefinementCheck>,
     /// Stage timings.
     pub timings: StageTimings,
 }
@@ -230,6 +239,9 @@ pub struct DearChain {
     refined: Array2<f32>,
     /// `hybrid` refiners: the classical refiner they build on, its output and confidence.
     classical: Option<ClassicalStage>,
+    /// The classical refiner frames fall back to when the output guard rejects the network's
+    /// output (other refiners than `hybrid`); made on the first rejection.
+    fallback: Option<ClassicalRefiner>,
 }
 
 /// The classical refiner run on the warped depth before a `hybrid` refine graph.
@@ -284,6 +296,7 @@ impl DearChain {
             amplitude_warped: plane(),
             refined: plane(),
             classical,
+            fallback: None,
         })
     }
 
@@ -415,18 +428,52 @@ impl DearChain {
         refine_result?;
         let ChainOutput {
             depth: mut out_depth,
-            confidence,
+            confidence: mut out_confidence,
         } = output;
-        let mut valid = 0usize;
-        Zip::from(&mut out_depth)
-            .and(&self.refined)
-            .and(&self.depth_warped)
-            .for_each(|o, &r, &z| {
-                let ok = is_valid_depth(z) && is_valid_depth(r);
-                *o = if ok { r } else { 0.0 };
-                valid += usize::from(is_valid_depth(z));
-            });
-        confidence_into(self.depth_warped.view(), self.refined.view(), confidence);
+        // The guard's pass counts the measured pixels too (`valid_fraction`).
+        let (valid, rejected_refinement) = match self.options.output_guard {
+            Some(guard) => {
+                let check = guard.check(self.depth_warped.view(), self.refined.view());
+                (check.measured, guard.rejects(&check).then_some(check))
+            }
+            None => {
+                let valid = self.depth_warped.iter().filter(|&&z| is_valid_depth(z));
+                (valid.count(), None)
+            }
+        };
+        match (rejected_refinement, &self.classical) {
+            (None, _) => {
+                Zip::from(&mut out_depth)
+                    .and(&self.refined)
+                    .and(&self.depth_warped)
+                    .for_each(|o, &r, &z| {
+                        *o = if is_valid_depth(z) && is_valid_depth(r) {
+                            r
+                        } else {
+                            0.0
+                        };
+                    });
+                confidence_into(
+                    self.depth_warped.view(),
+                    self.refined.view(),
+                    out_confidence,
+                );
+            }
+            // A hybrid refiner's classical stage already filtered this frame.
+            (Some(_), Some(stage)) => {
+                out_depth.assign(&stage.depth);
+                out_confidence.assign(&stage.confidence);
+            }
+            (Some(_), None) => self
+                .fallback
+                .get_or_insert_with(ClassicalRefiner::default)
+                .refine_into(
+                    self.depth_warped.view(),
+                    input.rgb,
+                    out_depth.view_mut(),
+                    out_confidence.view_mut(),
+                ),
+        }
         clock.lap(&mut t.refine);
         let (h, w) = self.dim();
         Ok(ChainReport {
@@ -438,6 +485,7 @@ impl DearChain {
             valid_fraction: valid as f32 / (h * w) as f32,
             amplitude_scale,
             alignment,
+            rejected_refinement,
             timings: t,
         })
     }

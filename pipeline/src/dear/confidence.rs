@@ -15,6 +15,8 @@
 //!     The refinement moves a depth far mainly where it judges the measurement wrong (MPI,
 //!     flying pixels); a pixel pulled one tolerance away from what was measured gets 0.37.
 //!
+//!   The result is clamped to at least 1: `0` exactly where the published depth is `0`.
+//!
 //! So 255 means "measured here, on a smooth surface, and the network agrees with the sensor".
 
 use ndarray::{ArrayView2, ArrayViewMut2, Axis, Zip};
@@ -111,7 +113,9 @@ fn confidence_row(
         let c = 255.0 * support as f32 / 9.0 * agreement;
         let t = c as u32;
         let rounded = if c - t as f32 >= 0.5 { t + 1 } else { t };
-        put(x, rounded.min(255) as u8);
+        // At least 1: 0 is reserved for "no depth here", so a valid but barely supported depth
+        // (e.g. a lone measured pixel the refinement moved far) must not read as invalid.
+        put(x, rounded.clamp(1, 255) as u8);
     }
 }
 
@@ -153,5 +157,21 @@ mod tests {
         confidence_into(warped.view(), warped.view(), out.view_mut());
         assert_eq!(out[[2, 2]], (255.0f32 * 6.0 / 9.0).round() as u8);
         assert_eq!(out[[2, 1]], 255);
+    }
+
+    #[test]
+    fn zero_exactly_where_there_is_no_depth() {
+        // A lone measured pixel among holes, which the refinement moved 50 tolerances away:
+        // support 1/9, agreement e^-50; unclamped that rounds to 0 and reads as "no depth".
+        let mut warped = Array2::zeros((5, 5));
+        warped[[2, 2]] = 2.0f32;
+        let mut refined = warped.clone();
+        refined[[2, 2]] = 2.0 + 50.0 * surface_tolerance(2.0);
+        let mut out = Array2::from_elem((5, 5), 7u8);
+        confidence_into(warped.view(), refined.view(), out.view_mut());
+        assert_eq!(out[[2, 2]], 1);
+        for ((y, x), &c) in out.indexed_iter() {
+            assert_eq!(c == 0, (y, x) != (2, 2), "({y}, {x})");
+        }
     }
 }

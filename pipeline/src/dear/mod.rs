@@ -6,11 +6,14 @@
 //! - [`chain`]: [`DearChain`], `Full` (the paper) and `Cached(calibration)` modes;
 //! - [`background`]: [`BackgroundCalibrator`], a `Full` frame's calibration measurement on a
 //!   worker thread, so network frames do not stall the frame path;
-//! - [`confidence`]: the published per-pixel confidence and its definition.
+//! - [`confidence`]: the published per-pixel confidence and its definition;
+//! - [`output_guard`]: [`OutputGuard`], the refinement network's output checked against
+//!   physics; a frame it rejects is refined classically instead.
 
 pub mod background;
 pub mod chain;
 pub mod confidence;
+pub mod output_guard;
 pub mod preprocess;
 
 pub use background::{BackgroundCalibrator, Delivered, Submit};
@@ -18,3 +21,4 @@ pub use chain::{
     CachedFusion, ChainError, ChainInput, ChainMode, ChainOptions, ChainOutput, ChainReport,
     DearChain, MeasureReport, StageTimings,
 };
+pub use output_guard::{OutputGuard, RefinementCheck};

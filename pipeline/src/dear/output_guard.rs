@@ -1,0 +1,202 @@
+//! The refinement network's output checked against physics before it is published.
+//!
+//! A refinement removes multi-path interference, flying pixels and noise: it moves a measured
+//! depth by centimetres, by up to the gap between two surfaces at an edge, and on a few pixels
+//! only by more. A graph that was exported wrongly, quantised badly, fed inputs it was never
+//! trained on or tampered with produces something else — every depth ×1000, NaN, negative —
+//! and without a check that would be published flagged as network-refined. The guard judges a
+//! frame's output as a whole: when more than [`OutputGuard::max_implausible_fraction`] of the
+//! pixels with a measured depth come out implausible, the frame is refined by the classical
+//! filter instead and the chain reports it ([`RefinementCheck`]).
+//!
+//! A pixel's output `r` for the measured (warped) depth `z` is implausible when it is not a
+//! positive finite depth, or moves further than `max(max_change_m, max_change_ratio · z)`.
+//! The defaults (0.5 m, 50 %, 5 % of the pixels) lie well outside what a working refiner does:
+//! the shipped bundle moves 1.0–2.0 % of the measured pixels of `samples/demo`'s frames that
+//! far (flying pixels at depth edges snapped across the gap), and a broken graph moves all of
+//! them (tests in `pipeline/tests/output_guard.rs`).
+
+use ndarray::ArrayView2;
+
+use crate::geometry::surface::is_valid_depth;
+
+/// Bounds on a refinement's output (see the module documentation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OutputGuard {
+    /// Largest plausible change of a measured depth, metres (the floor of the bound).
+    pub max_change_m: f32,
+    /// Largest plausible change as a fraction of the measured depth.
+    pub max_change_ratio: f32,
+    /// Fraction of measured pixels that may be implausible before the frame's refinement is
+    /// rejected (flying pixels moved across a wide gap are legitimate but rare).
+    pub max_implausible_fraction: f32,
+}
+
+impl Default for OutputGuard {
+    fn default() -> Self {
+        OutputGuard {
+            max_change_m: 0.5,
+            max_change_ratio: 0.5,
+            max_implausible_fraction: 0.05,
+        }
+    }
+}
+
+/// What the guard counted on one frame's refinement (and why it was rejected, when it was).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefinementCheck {
+    /// Pixels with a measured depth.
+    pub measured: usize,
+    /// Of those, outputs that are NaN or infinite.
+    pub non_finite: usize,
+    /// Of those, outputs at or below zero.
+    pub non_positive: usize,
+    /// Of those, positive finite outputs moved beyond the bound.
+    pub moved_too_far: usize,
+}
+
+impl RefinementCheck {
+    /// All implausible pixels.
+    pub fn implausible(&self) -> usize {
+        self.non_finite + self.non_positive + self.moved_too_far
+    }
+
+    /// Implausible pixels as a fraction of the measured ones.
+    pub fn implausible_fraction(&self) -> f32 {
+        self.implausible() as f32 / self.measured.max(1) as f32
+    }
+}
+
+impl std::fmt::Display for RefinementCheck {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{:.1} % of {} measured pixels implausible ({} non-finite, {} at or below zero, {} moved beyond the bound)",
+            100.0 * self.implausible_fraction(),
+            self.measured,
+            self.non_finite,
+            self.non_positive,
+            self.moved_too_far
+        )
+    }
+}
+
+impl OutputGuard {
+    /// Counts the implausible outputs of `refined` against the measured depth `warped` (same
+    /// shape).
+    ///
+    /// # Panics
+    /// If the shapes differ.
+    pub fn check(&self, warped: ArrayView2<f32>, refined: ArrayView2<f32>) -> RefinementCheck {
+        assert_eq!(warped.dim(), refined.dim(), "guard: shapes differ");
+        let mut counts = RefinementCheck {
+            measured: 0,
+            non_finite: 0,
+            non_positive: 0,
+            moved_too_far: 0,
+        };
+        ndarray::Zip::from(&warped)
+            .and(&refined)
+            .for_each(|&z, &r| {
+                if !is_valid_depth(z) {
+                    return;
+                }
+                counts.measured += 1;
+                if !r.is_finite() {
+                    counts.non_finite += 1;
+                } else if r <= 0.0 {
+                    counts.non_positive += 1;
+                } else if (r - z).abs() > self.max_change_m.max(self.max_change_ratio * z) {
+                    counts.moved_too_far += 1;
+                }
+            });
+        counts
+    }
+
+    /// Whether a frame with these counts must not be published as refined. A frame without
+    /// any measured pixel is never rejected (there is nothing to refine).
+    pub fn rejects(&self, check: &RefinementCheck) -> bool {
+        check.measured > 0 && check.implausible_fraction() > self.max_implausible_fraction
+    }
+
+    /// [`check`](Self::check), kept only when the guard [`rejects`](Self::rejects) it.
+    pub fn judge(
+        &self,
+        warped: ArrayView2<f32>,
+        refined: ArrayView2<f32>,
+    ) -> Option<RefinementCheck> {
+        let check = self.check(warped, refined);
+        self.rejects(&check).then_some(check)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array2;
+
+    fn scene() -> Array2<f32> {
+        Array2::from_shape_fn((20, 30), |(y, x)| {
+            if (y + x) % 11 == 0 {
+                0.0
+            } else {
+                1.0 + 0.05 * x as f32
+            }
+        })
+    }
+
+    #[test]
+    fn a_refinement_of_centimetres_and_a_few_edge_jumps_passes() {
+        let z = scene();
+        let mut r = z.mapv(|z| if z > 0.0 { z + 0.03 } else { 0.0 });
+        // 2 % of the pixels moved across a 1.5 m gap (flying pixels snapped to the background).
+        for x in 0..12 {
+            r[[5, x]] += 1.5;
+        }
+        assert_eq!(OutputGuard::default().judge(z.view(), r.view()), None);
+    }
+
+    #[test]
+    fn scaled_nan_and_negative_outputs_are_rejected_and_counted() {
+        let z = scene();
+        let measured = z.iter().filter(|&&v| v > 0.0).count();
+        let guard = OutputGuard::default();
+        let scaled = guard
+            .judge(z.view(), z.mapv(|v| v * 1000.0).view())
+            .unwrap();
+        assert_eq!(
+            (scaled.measured, scaled.moved_too_far),
+            (measured, measured)
+        );
+        let nan = guard.judge(z.view(), z.mapv(|_| f32::NAN).view()).unwrap();
+        assert_eq!(nan.non_finite, measured);
+        let negative = guard.judge(z.view(), z.mapv(|v| -v).view()).unwrap();
+        assert_eq!(negative.non_positive, measured);
+        assert!((negative.implausible_fraction() - 1.0).abs() < 1e-6);
+        assert!(
+            negative.to_string().contains("at or below zero"),
+            "{negative}"
+        );
+    }
+
+    #[test]
+    fn the_fraction_threshold_decides() {
+        let z = Array2::from_elem((10, 10), 2.0f32);
+        let mut r = z.clone();
+        // 5 of 100 pixels NaN: at the threshold, not beyond it.
+        for x in 0..5 {
+            r[[0, x]] = f32::NAN;
+        }
+        let guard = OutputGuard::default();
+        assert_eq!(guard.judge(z.view(), r.view()), None);
+        r[[0, 5]] = f32::NAN;
+        assert_eq!(guard.judge(z.view(), r.view()).unwrap().non_finite, 6);
+    }
+
+    #[test]
+    fn a_frame_without_measured_depth_is_not_rejected() {
+        let z = Array2::zeros((4, 4));
+        let r = Array2::from_elem((4, 4), f32::NAN);
+        assert_eq!(OutputGuard::default().judge(z.view(), r.view()), None);
+    }
+}
