@@ -9,6 +9,9 @@ use crate::calibration::Calibration;
 pub const FORMAT_NAME: &str = "dear-capture";
 /// The manifest version this code writes and reads.
 pub const FORMAT_VERSION: u32 = 1;
+/// Largest accepted image side, in the manifest and in any image or flow file: guards against a
+/// corrupt file asking for absurd buffers.
+pub const MAX_SIDE: u32 = 8192;
 
 /// Pinhole intrinsics of the (rectified) camera the frames are given in, pixels.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -1,57 +1,153 @@
 //! PNG codecs for the per-frame images, with the checks the format promises: bit depth,
 //! channel count and resolution are verified and reported with the file's name.
+//!
+//! The checks come before any pixel is decoded: the declared size is read from the IHDR chunk
+//! and compared with the capture's, and the decoder runs under [`Limits`] sized for the expected
+//! image. A small file that declares 16000x16000 is refused in microseconds instead of costing
+//! seconds and half a gigabyte, and behind it the good frames keep flowing.
 
+use std::fs::File;
+use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
 
-use image::{DynamicImage, ImageBuffer, ImageReader, Luma, Rgb};
+use image::codecs::png::PngDecoder;
+use image::{ColorType, DynamicImage, ImageBuffer, ImageDecoder, Limits, Luma, Rgb};
 use ndarray::{Array2, Array3, ArrayView2, ArrayView3};
 
 use super::error::CaptureError;
+use super::manifest::MAX_SIDE;
 
-fn decode(path: &Path) -> Result<DynamicImage, CaptureError> {
-    let reader = ImageReader::open(path).map_err(|e| CaptureError::io(path, e))?;
-    let reader = reader
-        .with_guessed_format()
-        .map_err(|e| CaptureError::io(path, e))?;
-    reader.decode().map_err(|e| CaptureError::Decode {
-        path: path.to_owned(),
-        message: e.to_string(),
-    })
+/// Bytes the decoder may hold besides the image itself: metadata chunks it keeps (text, ICC
+/// profile) and row buffers. A camera writes a few KiB of metadata; the bound stops a crafted
+/// chunk from asking for gigabytes before the first pixel.
+const METADATA_BUDGET: u64 = 16 << 20;
+
+/// The 8 bytes every PNG file starts with.
+const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
+
+/// What one image plane's PNG must decode to: the colour type fixes channels and bit depth.
+#[derive(Debug, Clone, Copy)]
+struct Plane {
+    color: ColorType,
+    /// How errors describe it.
+    name: &'static str,
 }
 
-fn check_size(
+const RGB8: Plane = Plane {
+    color: ColorType::Rgb8,
+    name: "8-bit RGB",
+};
+const GREY16: Plane = Plane {
+    color: ColorType::L16,
+    name: "16-bit grey",
+};
+const GREY8: Plane = Plane {
+    color: ColorType::L8,
+    name: "8-bit grey",
+};
+
+fn decode_err(path: &Path, message: impl std::fmt::Display) -> CaptureError {
+    CaptureError::Decode {
+        path: path.to_owned(),
+        message: message.to_string(),
+    }
+}
+
+/// The declared `(width, height)` of a PNG, from its IHDR chunk. The format fixes where it is:
+/// the 8-byte signature, then the first chunk, which must be IHDR (4-byte length, `IHDR`, then
+/// width and height as big-endian u32). Reading these 24 bytes allocates nothing; the decoder
+/// checks the rest of the chunk (CRC, bit depth, colour type) afterwards.
+fn declared_size(path: &Path, file: &mut impl Read) -> Result<(u32, u32), CaptureError> {
+    let mut head = [0u8; 24];
+    file.read_exact(&mut head).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::UnexpectedEof {
+            decode_err(path, "file too short for a PNG header (24 bytes)")
+        } else {
+            CaptureError::io(path, e)
+        }
+    })?;
+    if head[..8] != PNG_SIGNATURE {
+        return Err(decode_err(path, "not a PNG file (no PNG signature)"));
+    }
+    if &head[12..16] != b"IHDR" {
+        return Err(decode_err(path, "the first chunk is not IHDR"));
+    }
+    let be = |i: usize| u32::from_be_bytes([head[i], head[i + 1], head[i + 2], head[i + 3]]);
+    Ok((be(16), be(20)))
+}
+
+/// Decodes the PNG at `path` as `plane`, after checking its declared size against `size`
+/// (expected `(width, height)`; with none, each side must be at most [`MAX_SIDE`]) and its
+/// colour type against the plane's. Only an image of the expected size and type is decoded.
+fn decode(
     path: &Path,
-    img: &DynamicImage,
     size: Option<(u32, u32)>,
-) -> Result<(), CaptureError> {
-    if let Some((width, height)) = size {
-        if img.width() != width || img.height() != height {
+    plane: Plane,
+) -> Result<DynamicImage, CaptureError> {
+    let mut file = File::open(path).map_err(|e| CaptureError::io(path, e))?;
+    let (w, h) = declared_size(path, &mut file)?;
+    match size {
+        Some((width, height)) if (w, h) != (width, height) => {
             return Err(CaptureError::Resolution {
                 path: path.to_owned(),
                 width,
                 height,
-                found_w: img.width(),
-                found_h: img.height(),
+                found_w: w,
+                found_h: h,
             });
         }
+        None if w > MAX_SIDE || h > MAX_SIDE => {
+            return Err(CaptureError::Format {
+                path: path.to_owned(),
+                expected: format!("an image of at most {MAX_SIDE}x{MAX_SIDE}"),
+                found: format!("{w}x{h}"),
+            });
+        }
+        _ => {}
     }
-    Ok(())
+    file.seek(SeekFrom::Start(0))
+        .map_err(|e| CaptureError::io(path, e))?;
+    // Checked although the sides are bounded here: every size read from a file is.
+    let image_bytes = u64::from(w)
+        .checked_mul(u64::from(h))
+        .and_then(|n| n.checked_mul(u64::from(plane.color.bytes_per_pixel())))
+        .and_then(|n| n.checked_add(METADATA_BUDGET))
+        .ok_or_else(|| decode_err(path, format!("{w}x{h} overflows a byte count")))?;
+    // Defence in depth: the decoder itself refuses any other size and any allocation beyond
+    // the expected image plus its metadata budget.
+    let mut limits = Limits::default();
+    limits.max_image_width = Some(w);
+    limits.max_image_height = Some(h);
+    limits.max_alloc = Some(image_bytes);
+    let decoder =
+        PngDecoder::with_limits(BufReader::new(file), limits).map_err(|e| decode_err(path, e))?;
+    // `with_limits` has read the chunks before the pixel data, not the pixels: the colour type
+    // is known and nothing image-sized is allocated yet.
+    if decoder.color_type() != plane.color {
+        return Err(CaptureError::Format {
+            path: path.to_owned(),
+            expected: plane.name.into(),
+            found: format!("{:?}", decoder.color_type()),
+        });
+    }
+    DynamicImage::from_decoder(decoder).map_err(|e| decode_err(path, e))
 }
 
-fn color_name(img: &DynamicImage) -> String {
-    format!("{:?}", img.color())
+/// The error for a decoded image that is not `plane` (cannot happen after [`decode`]'s check;
+/// kept as an error, not a panic, should the decoder ever disagree with itself).
+fn wrong_plane(path: &Path, img: &DynamicImage, plane: Plane) -> CaptureError {
+    CaptureError::Format {
+        path: path.to_owned(),
+        expected: plane.name.into(),
+        found: format!("{:?}", img.color()),
+    }
 }
 
 /// Reads an 8-bit RGB PNG as `(H, W, 3)`. `size` = expected `(width, height)`.
 pub fn read_rgb(path: &Path, size: Option<(u32, u32)>) -> Result<Array3<u8>, CaptureError> {
-    let img = decode(path)?;
-    check_size(path, &img, size)?;
+    let img = decode(path, size, RGB8)?;
     let DynamicImage::ImageRgb8(buf) = img else {
-        return Err(CaptureError::Format {
-            path: path.to_owned(),
-            expected: "8-bit RGB".into(),
-            found: color_name(&img),
-        });
+        return Err(wrong_plane(path, &img, RGB8));
     };
     let (w, h) = buf.dimensions();
     Ok(
@@ -62,14 +158,9 @@ pub fn read_rgb(path: &Path, size: Option<(u32, u32)>) -> Result<Array3<u8>, Cap
 
 /// Reads a 16-bit single-channel PNG as `(H, W)` raw values.
 pub fn read_u16(path: &Path, size: Option<(u32, u32)>) -> Result<Array2<u16>, CaptureError> {
-    let img = decode(path)?;
-    check_size(path, &img, size)?;
+    let img = decode(path, size, GREY16)?;
     let DynamicImage::ImageLuma16(buf) = img else {
-        return Err(CaptureError::Format {
-            path: path.to_owned(),
-            expected: "16-bit grey".into(),
-            found: color_name(&img),
-        });
+        return Err(wrong_plane(path, &img, GREY16));
     };
     let (w, h) = buf.dimensions();
     Ok(Array2::from_shape_vec((h as usize, w as usize), buf.into_raw()).expect("grey buffer size"))
@@ -77,14 +168,9 @@ pub fn read_u16(path: &Path, size: Option<(u32, u32)>) -> Result<Array2<u16>, Ca
 
 /// Reads an 8-bit single-channel PNG as a mask (`true` where non-zero).
 pub fn read_mask(path: &Path, size: Option<(u32, u32)>) -> Result<Array2<bool>, CaptureError> {
-    let img = decode(path)?;
-    check_size(path, &img, size)?;
+    let img = decode(path, size, GREY8)?;
     let DynamicImage::ImageLuma8(buf) = img else {
-        return Err(CaptureError::Format {
-            path: path.to_owned(),
-            expected: "8-bit grey".into(),
-            found: color_name(&img),
-        });
+        return Err(wrong_plane(path, &img, GREY8));
     };
     let (w, h) = buf.dimensions();
     let data = buf.into_raw().into_iter().map(|v| v != 0).collect();

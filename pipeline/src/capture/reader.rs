@@ -6,12 +6,10 @@ use std::path::{Path, PathBuf};
 
 use super::error::CaptureError;
 use super::layout::{FramePaths, MANIFEST_FILE};
-use super::manifest::{CaptureManifest, FORMAT_NAME, FORMAT_VERSION};
+use super::manifest::{CaptureManifest, FORMAT_NAME, FORMAT_VERSION, MAX_SIDE};
 use super::{flo, png};
+use crate::calibration::Calibration;
 use crate::frame::RgbdFrame;
-
-/// Largest accepted image side: guards against a corrupt manifest asking for absurd buffers.
-const MAX_SIDE: u32 = 8192;
 
 /// An opened, validated capture directory. Frames are read on demand, so a bad frame costs an
 /// error for that frame only.
@@ -27,11 +25,10 @@ impl CaptureDir {
         let root = root.as_ref().to_owned();
         let path = root.join(MANIFEST_FILE);
         let text = fs::read_to_string(&path).map_err(|e| CaptureError::io(&path, e))?;
-        let manifest: CaptureManifest =
-            serde_json::from_str(&text).map_err(|e| CaptureError::Manifest {
-                path: path.clone(),
-                message: e.to_string(),
-            })?;
+        let manifest = parse_manifest(&text).map_err(|message| CaptureError::Manifest {
+            path: path.clone(),
+            message,
+        })?;
         validate(&manifest).map_err(|message| CaptureError::Manifest { path, message })?;
         Ok(CaptureDir { root, manifest })
     }
@@ -109,6 +106,24 @@ fn optional<T>(
     }
 }
 
+/// Deserialises `capture.json` text. A type error names the field it is in (`field
+/// `frames[3].timestamp_ns`: invalid type ...`), which serde_json alone reports only as a line
+/// and column.
+fn parse_manifest(text: &str) -> Result<CaptureManifest, String> {
+    let mut de = serde_json::Deserializer::from_str(text);
+    let manifest: CaptureManifest = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+        let field = e.path().to_string();
+        if field == "." {
+            e.inner().to_string()
+        } else {
+            format!("field `{field}`: {}", e.inner())
+        }
+    })?;
+    // What serde_json::from_str checks too: nothing but whitespace after the object.
+    de.end().map_err(|e| e.to_string())?;
+    Ok(manifest)
+}
+
 /// Checks the manifest's own consistency; the message names the offending field.
 fn validate(m: &CaptureManifest) -> Result<(), String> {
     if m.format != FORMAT_NAME {
@@ -155,6 +170,9 @@ fn validate(m: &CaptureManifest) -> Result<(), String> {
             "field `modulation_frequencies_hz` contains {f}, expected positive frequencies"
         ));
     }
+    // f32 fields take JSON numbers beyond f32 (`1e39`) as infinity; a calibration that is not
+    // finite aligns no pixel, so it is refused here, by field, rather than met frame by frame.
+    check_calibration("initial_calibration", &m.initial_calibration)?;
     let mut seen = HashSet::new();
     let mut last_time = 0;
     for (i, frame) in m.frames.iter().enumerate() {
@@ -174,6 +192,21 @@ fn validate(m: &CaptureManifest) -> Result<(), String> {
             ));
         }
         last_time = frame.timestamp_ns;
+        if let Some(p) = &frame.perturbation {
+            check_calibration(&format!("frames[{i}].perturbation"), p)?;
+        }
+    }
+    Ok(())
+}
+
+/// Every parameter of `c` is finite; the error names `field.<parameter>`.
+fn check_calibration(field: &str, c: &Calibration) -> Result<(), String> {
+    for (name, v) in [("tx", c.tx), ("ty", c.ty), ("cx", c.cx), ("cy", c.cy)] {
+        if !v.is_finite() {
+            return Err(format!(
+                "field `{field}.{name}` is {v}, expected a finite number (beyond f32's range?)"
+            ));
+        }
     }
     Ok(())
 }

@@ -254,7 +254,16 @@ impl Manifest {
             }
             None => return Err(bad("no integer \"format_version\" field".into())),
         }
-        let m: Manifest = serde_json::from_value(value).map_err(|e| bad(e.to_string()))?;
+        // The path says which field a type error is in (`graphs.flow.bytes: invalid type ...`);
+        // from a parsed value serde_json reports neither a field nor a line.
+        let m: Manifest = serde_path_to_error::deserialize(value).map_err(|e| {
+            let field = e.path().to_string();
+            if field == "." {
+                bad(e.inner().to_string())
+            } else {
+                bad(format!("field `{field}`: {}", e.inner()))
+            }
+        })?;
         if m.input_size_multiple == 0 || m.input_size_multiple > 1024 {
             return Err(bad(format!(
                 "input_size_multiple {} is not in 1..=1024",
