@@ -446,6 +446,20 @@ fn check_tensors(
                 t.name, t.shape
             ));
         }
+        // A dimension is a symbol the runner binds ("N", "H", "W/4") or a fixed positive
+        // size; anything else (a negative or fractional number, null, a list) is a broken
+        // export, named here rather than met by tract.
+        let dimension = |d: &serde_json::Value| match d {
+            serde_json::Value::String(s) => !s.is_empty(),
+            other => other.as_u64().is_some_and(|n| n > 0),
+        };
+        if !t.shape.iter().all(dimension) {
+            return Err(format!(
+                "{kind} {:?} has shape {:?}; each dimension must be a symbol such as \"N\" or \
+                 a positive integer",
+                t.name, t.shape
+            ));
+        }
         if t.channels() != Some(channels) {
             return Err(format!(
                 "{kind} {:?} has {} channels, expected {channels}",
