@@ -26,8 +26,8 @@ pub enum FrameError {
     /// message names the field).
     #[error(transparent)]
     Header(#[from] HeaderError),
-    /// The depth plane cannot be read as `f32` in place (the service was created with another
-    /// payload alignment than the protocol's).
+    /// The depth plane cannot be read as `f32` in place (the payload does not start at the
+    /// protocol's alignment: a service made by a party that changed the user header).
     #[error("the payload at {address:#x} is not aligned for f32 depth")]
     Misaligned { address: usize },
 }

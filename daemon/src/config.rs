@@ -10,6 +10,8 @@ use serde::{Deserialize, Serialize};
 /// Largest `[capture] queue_depth`: a few frames absorb jitter; a longer queue only adds memory
 /// and latency (each waiting frame is a full RGB-D frame).
 pub const MAX_QUEUE_DEPTH: usize = 64;
+/// Largest `[service] max_shared_memory_mb`: 64 GiB.
+pub const MAX_SHARED_MEMORY_MB: u64 = 65_536;
 /// Longest `[runtime] stats_interval_s`: a day.
 pub const MAX_STATS_INTERVAL_S: f64 = 86_400.0;
 /// Largest `|t_x|`, `|t_y|` of `[pipeline] static_calibration`, px·m: a 10 cm baseline at a
@@ -38,6 +40,10 @@ pub struct ServiceConfig {
     pub camera: String,
     /// Explicit iceoryx2 service name (overrides `camera`).
     pub name: Option<String>,
+    /// Largest shared memory the frame service may take, MB (1..=[`MAX_SHARED_MEMORY_MB`]):
+    /// the publisher's data segment holds `dear_proto::samples_in_shared_memory()` frames. A
+    /// stream that needs more, or more than `/dev/shm` has free, is refused at start.
+    pub max_shared_memory_mb: u64,
 }
 
 impl Default for ServiceConfig {
@@ -45,6 +51,7 @@ impl Default for ServiceConfig {
         ServiceConfig {
             camera: dear_proto::DEFAULT_CAMERA.to_string(),
             name: None,
+            max_shared_memory_mb: 1024,
         }
     }
 }
@@ -257,6 +264,12 @@ impl Config {
     /// Checks values serde cannot. Errors name the key and the allowed values.
     pub fn validate(&self) -> Result<(), String> {
         self.validate_service()?;
+        let shm = self.service.max_shared_memory_mb;
+        if !(1..=MAX_SHARED_MEMORY_MB).contains(&shm) {
+            return Err(format!(
+                "[service] max_shared_memory_mb = {shm} must be within 1..={MAX_SHARED_MEMORY_MB}"
+            ));
+        }
         if self.capture.source != "replay" {
             return Err(format!(
                 "[capture] source = {:?}: supported sources: \"replay\"",

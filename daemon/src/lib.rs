@@ -3,7 +3,8 @@
 //! memory.
 //!
 //! Data flows one way: [`capture`] → [`queue`] → [`processing`] → [`publish`]. [`config`] is
-//! the TOML configuration, [`stats`] the live statistics, [`run`] the daemon's life cycle.
+//! the TOML configuration, [`stats`] the live statistics, [`run`] the daemon's life cycle,
+//! [`shared_memory`] what a stream needs of it.
 
 pub mod capture;
 pub mod config;
@@ -11,4 +12,5 @@ pub mod processing;
 pub mod publish;
 pub mod queue;
 pub mod run;
+pub mod shared_memory;
 pub mod stats;

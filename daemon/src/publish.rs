@@ -35,12 +35,17 @@ pub struct FramePublisher {
 impl FramePublisher {
     /// Creates the node, cleans up what crashed processes left behind, and opens the services.
     pub fn new(name: &str, width: u32, height: u32) -> Result<Self, String> {
+        // The dead-node cleanup that iceoryx2 runs inside `create` reports nothing; turned off
+        // there, the explicit one below can say what it removed (it logged `cleanups: 0` after
+        // `create` had already removed everything).
+        let mut config = iceoryx2::config::Config::global_config().clone();
+        config.global.node.cleanup_dead_nodes_on_creation = false;
         let node = NodeBuilder::new()
+            .config(&config)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .map_err(|e| format!("cannot create the iceoryx2 node: {e:?}"))?;
-        let cleanup = node.try_cleanup_dead_nodes();
-        tracing::info!(?cleanup, "removed stale resources of dead processes");
+        log_cleanup(node.try_cleanup_dead_nodes(), "at start");
         let frames = frame_service(&node, name).map_err(|e| error_chain(&e))?;
         let events = frame_event_service(&node, name).map_err(|e| error_chain(&e))?;
         let layout = PayloadLayout::new(width, height)
@@ -54,6 +59,7 @@ impl FramePublisher {
             .notifier_builder()
             .create()
             .map_err(|e| format!("cannot create a notifier on {name:?}: {e:?}"))?;
+        refuse_a_second_publisher(&frames, publisher.id(), name)?;
         let run_id = dear_proto::random_run_id()
             .map_err(|e| format!("cannot draw a run id for {name:?} (getrandom): {e}"))?;
         tracing::info!(run_id = format_args!("{run_id:016x}"), "publisher instance");
@@ -134,9 +140,58 @@ impl FramePublisher {
     /// Removes ports of subscribers that died without cleaning up, so their queues stop taking
     /// samples. Called periodically by the daemon.
     pub fn cleanup_dead_peers(&self) {
-        let state = self.node.try_cleanup_dead_nodes();
-        tracing::debug!(?state, "dead-node cleanup");
+        log_cleanup(self.node.try_cleanup_dead_nodes(), "of dead clients");
     }
+}
+
+/// Logs what a dead-node cleanup did, when it did anything.
+fn log_cleanup(state: iceoryx2::node::CleanupState, when: &str) {
+    if state.cleanups > 0 {
+        tracing::info!(
+            processes = state.cleanups,
+            "removed the shared-memory resources of dead processes ({when})"
+        );
+    }
+    if state.failed_cleanups > 0 {
+        tracing::warn!(
+            processes = state.failed_cleanups,
+            "could not remove the shared-memory resources of dead processes ({when}); \
+             they belong to another user or are in use"
+        );
+    }
+}
+
+/// One publisher per service (after the cleanup above, every other one is alive): a second
+/// daemon on the same service would interleave two streams whose frame ids and calibrations
+/// have nothing to do with each other. Two daemons starting in the same instant both see the
+/// other and both refuse; one of them is restarted by its supervisor and finds the service
+/// free.
+fn refuse_a_second_publisher(
+    frames: &FrameService,
+    own: iceoryx2::identifiers::UniquePublisherId,
+    name: &str,
+) -> Result<(), String> {
+    let mut others = Vec::new();
+    frames.dynamic_config().list_publishers(|details| {
+        if details.publisher_id != own {
+            others.push(
+                details
+                    .node_id
+                    .pid::<ipc::Service>()
+                    .map(|pid| pid.value().to_string())
+                    .unwrap_or_else(|_| "unknown".into()),
+            );
+        }
+        CallbackProgression::Continue
+    });
+    if others.is_empty() {
+        return Ok(());
+    }
+    Err(format!(
+        "another process already publishes on {name:?} (pid {}): one deard per service; stop \
+         it, or give this one another [service] camera / --camera",
+        others.join(", ")
+    ))
 }
 
 /// An error and its sources as one line (`a: b: c`), for this module's `String` errors, so the
@@ -152,9 +207,9 @@ fn error_chain(e: &dyn std::error::Error) -> String {
     text
 }
 
-/// Reinterprets the depth plane as `f32`. The payload is 64-byte aligned and the depth plane
-/// starts at offset 0 with a length of `4·pixels`, so this cannot fail unless the service was
-/// created with another alignment.
+/// Reinterprets the depth plane as `f32`. The payload starts 8-byte aligned
+/// ([`dear_proto::PAYLOAD_ALIGNMENT`]) and the depth plane at offset 0 with a length of
+/// `4·pixels`, so this cannot fail unless iceoryx2 changed where it puts the payload.
 fn bytes_as_f32(bytes: &mut [u8]) -> Result<&mut [f32], String> {
     if !(bytes.as_ptr() as usize).is_multiple_of(std::mem::align_of::<f32>())
         || !bytes.len().is_multiple_of(4)

@@ -14,6 +14,7 @@ use crate::config::{check_calibration_fits, Config, Pacing};
 use crate::processing::Processor;
 use crate::publish::FramePublisher;
 use crate::queue::{FrameQueue, Overflow};
+use crate::shared_memory;
 use crate::stats::Stats;
 
 /// How often ports of dead subscribers are reclaimed.
@@ -48,6 +49,13 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
     let service = config.service.service_name();
     tracing::info!(source = %source.describe(), %service, width, height, ?calibration, bundle = ?config.pipeline.bundle, refine = ?config.pipeline.refine, "starting");
 
+    shared_memory::check_fits(
+        width,
+        height,
+        config.service.max_shared_memory_mb,
+        std::path::Path::new(shared_memory::SHM_DIR),
+    )
+    .map_err(|e| format!("cannot serve {service:?}: {e}"))?;
     let publisher = FramePublisher::new(&service, width, height)?;
     let mut processor = Processor::from_config(width, height, calibration, &config.pipeline)?;
     let overflow = match config.capture.pacing {

@@ -185,3 +185,38 @@ fn online_network_placement_is_background_by_default_and_checked() {
         "{err}"
     );
 }
+
+#[test]
+fn max_shared_memory_is_bounded_and_enforced_at_start() {
+    for mb in ["0", "65537", "18446744073709551615"] {
+        let err = rejected(&format!("[service]\nmax_shared_memory_mb = {mb}\n"));
+        assert!(
+            err.contains(&format!("max_shared_memory_mb = {mb}")) && err.contains("1..=65536"),
+            "{err}"
+        );
+    }
+    assert_eq!(accepted("").service.max_shared_memory_mb, 1024);
+    // samples/demo (320x240) needs 21.5 MB: a 10 MB limit refuses it before any is taken.
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("deard.toml");
+    std::fs::write(&file, "[service]\nmax_shared_memory_mb = 10\n").unwrap();
+    let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
+    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
+        .args(["--config", file.to_str().unwrap(), "--replay", demo])
+        .args([
+            "--refine",
+            "none",
+            "--service",
+            &format!("dear-test/{}/shm-limit/frames", std::process::id()),
+            "--exit-when-done",
+        ])
+        .output()
+        .expect("run deard");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("320x240 stream needs 21.5 MB of shared memory")
+            && err.contains("max_shared_memory_mb = 10"),
+        "{err}"
+    );
+}

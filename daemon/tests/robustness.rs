@@ -254,3 +254,59 @@ fn a_looping_replay_with_some_readable_frames_keeps_serving() {
     let status = daemon.wait(STOP_WITHIN).expect("stops on SIGTERM");
     assert!(status.success(), "{status}\n{}", daemon.log_text());
 }
+
+/// One daemon per service: a second one refuses to start, naming the first one's process, and
+/// the first keeps serving; once the first is killed (its publisher left behind in shared
+/// memory), a new one cleans up after it and serves.
+#[test]
+fn a_second_daemon_on_the_same_service_refuses_to_start() {
+    let tmp = tempfile::tempdir().unwrap();
+    let service = unique_service("single-instance");
+    let mut first = Daemon::start(
+        &service,
+        &demo(),
+        &["--loop"],
+        &tmp.path().join("first.log"),
+    );
+    first.wait_for_log("serving", Duration::from_secs(60));
+    let mut second = Daemon::start(
+        &service,
+        &demo(),
+        &["--loop"],
+        &tmp.path().join("second.log"),
+    );
+    let status = second
+        .wait(Duration::from_secs(60))
+        .unwrap_or_else(|| panic!("the second deard kept running:\n{}", second.log_text()));
+    assert!(!status.success(), "{status}\n{}", second.log_text());
+    let log = second.log_text();
+    assert!(
+        log.contains("another process already publishes")
+            && log.contains(&format!("pid {}", first.child.id())),
+        "{log}"
+    );
+    assert!(
+        matches!(first.child.try_wait(), Ok(None)),
+        "the first deard keeps serving:\n{}",
+        first.log_text()
+    );
+
+    first.signal("-KILL");
+    first.wait(STOP_WITHIN).expect("killed");
+    let mut third = Daemon::start(
+        &service,
+        &demo(),
+        &["--loop"],
+        &tmp.path().join("third.log"),
+    );
+    third.wait_for_log("serving", Duration::from_secs(60));
+    assert!(
+        third
+            .log_text()
+            .contains("removed the shared-memory resources of dead processes"),
+        "{}",
+        third.log_text()
+    );
+    third.signal("-TERM");
+    assert!(third.wait(STOP_WITHIN).expect("stops").success());
+}

@@ -7,8 +7,12 @@ pub const MAGIC: u32 = u32::from_le_bytes(*b"DEAR");
 /// Bumped on any change of the header or payload layout. 2: `run_id` and `sequence` were
 /// taken from `reserved` (same size, same offsets for every older field).
 pub const FORMAT_VERSION: u32 = 2;
-/// Alignment of the payload in shared memory: enough for `f32` and for SIMD loads.
-pub const PAYLOAD_ALIGNMENT: usize = 64;
+/// Alignment of the payload's start in shared memory: 8, because iceoryx2 places the payload
+/// right after the 8-aligned, 192-byte user header (and aligns every chunk to 8). Enough for
+/// the `f32` depth plane. It is *not* passed to iceoryx2 as the payload alignment: iceoryx2
+/// pads every element of a slice payload to that alignment, so a `[u8]` payload aligned to 64
+/// took 64 bytes per byte (a 1.4 GB sparse data file for a 320×240 stream).
+pub const PAYLOAD_ALIGNMENT: usize = 8;
 /// Bytes of the bundle name field (UTF-8, NUL-padded).
 pub const BUNDLE_NAME_LEN: usize = 32;
 /// Payload bytes per pixel: `f32` depth, three `u8` RGB, one `u8` confidence.
@@ -357,7 +361,7 @@ pub struct LayoutError {
 }
 
 /// Where each plane of a frame lies in the payload: depth (`f32`), then RGB (`u8`×3), then
-/// confidence (`u8`). Depth first keeps it aligned to the payload's 64-byte alignment.
+/// confidence (`u8`). Depth first keeps it aligned to the payload's [`PAYLOAD_ALIGNMENT`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PayloadLayout {
     pub width: usize,

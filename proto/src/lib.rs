@@ -19,10 +19,10 @@ pub mod time;
 
 pub use header::{
     flags, random_run_id, FrameHeader, HeaderError, LayoutError, PayloadLayout, Stage,
-    FORMAT_VERSION, MAGIC,
+    FORMAT_VERSION, MAGIC, PAYLOAD_ALIGNMENT,
 };
 pub use service::{
-    default_service_name, frame_event_service, frame_service, validate_service_name,
-    EventServiceError, FrameEventService, FrameService, FrameServiceError, ServiceNameError,
-    DEFAULT_CAMERA,
+    default_service_name, frame_event_service, frame_service, samples_in_shared_memory,
+    validate_service_name, EventServiceError, FrameEventService, FrameService, FrameServiceError,
+    ServiceNameError, DEFAULT_CAMERA,
 };

@@ -14,7 +14,7 @@ use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
-use crate::header::{FrameHeader, PAYLOAD_ALIGNMENT};
+use crate::header::FrameHeader;
 
 /// Frames queued per subscriber before the oldest is overwritten.
 pub const QOS_SUBSCRIBER_BUFFER: usize = 2;
@@ -22,14 +22,23 @@ pub const QOS_SUBSCRIBER_BUFFER: usize = 2;
 pub const QOS_SUBSCRIBER_BORROWED: usize = 2;
 /// Frames a late-joining subscriber receives at once (the latest one).
 pub const QOS_HISTORY: usize = 1;
-/// Subscribers one daemon serves. Shared memory grows with it: about
-/// `(QOS_MAX_SUBSCRIBERS · (BUFFER + BORROWED) + 3) · frame size` (86 MB at 640×480).
+/// Subscribers one daemon serves. Shared memory grows with it: the publisher's data segment
+/// holds [`samples_in_shared_memory`] frames (35 with these values: 21.5 MB at 320×240, 86 MB
+/// at 640×480), allocated as written (a frame's pages once it has been sent).
 pub const QOS_MAX_SUBSCRIBERS: usize = 8;
 /// Publishers: one daemon, plus one slot so a restarted daemon can start before the dead
 /// instance's port is cleaned up.
 pub const QOS_MAX_PUBLISHERS: usize = 2;
 /// Nodes (processes) attached to the service.
 pub const QOS_MAX_NODES: usize = QOS_MAX_SUBSCRIBERS + QOS_MAX_PUBLISHERS + 4;
+
+/// Frames the publisher's data segment holds: every subscriber's queue and borrowed samples,
+/// the history, and the publisher's own loans (iceoryx2 0.10 sizes it so:
+/// `max_subscribers · (buffer + borrowed) + history + max_loaned`, with one loan and one
+/// sample in flight). Frame size × this is the shared memory one stream can take.
+pub const fn samples_in_shared_memory() -> usize {
+    QOS_MAX_SUBSCRIBERS * (QOS_SUBSCRIBER_BUFFER + QOS_SUBSCRIBER_BORROWED) + QOS_HISTORY + 2
+}
 
 /// Default camera name.
 pub const DEFAULT_CAMERA: &str = "cam0";
@@ -129,7 +138,6 @@ pub fn frame_service(
     node.service_builder(&service_name)
         .publish_subscribe::<[u8]>()
         .user_header::<FrameHeader>()
-        .payload_alignment(Alignment::new(PAYLOAD_ALIGNMENT).expect("power of two"))
         .enable_safe_overflow(true)
         .subscriber_max_buffer_size(QOS_SUBSCRIBER_BUFFER)
         .subscriber_max_borrowed_samples(QOS_SUBSCRIBER_BORROWED)

@@ -5,7 +5,6 @@
 //! [`dear_proto::FrameHeader`]), so services started with any `--service` name are found.
 
 use anyhow::Context;
-use dear_proto::header::PAYLOAD_ALIGNMENT;
 use dear_proto::FrameHeader;
 use iceoryx2::prelude::*;
 use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as Pattern;
@@ -75,7 +74,6 @@ fn count_ports(node: &Node<ipc::Service>, name: &str) -> Option<(usize, usize)> 
         .service_builder(&service_name)
         .publish_subscribe::<[u8]>()
         .user_header::<FrameHeader>()
-        .payload_alignment(Alignment::new(PAYLOAD_ALIGNMENT)?)
         .open()
         .inspect_err(|e| tracing::debug!(service = name, error = ?e, "cannot open to count ports"))
         .ok()?;
