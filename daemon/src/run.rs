@@ -66,7 +66,8 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
     let capture = spawn_capture(Box::new(source), queue.clone(), shutdown.clone());
 
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
-    tracing::info!(%service, "serving");
+    let mut watchdog = Watchdog::from_env();
+    tracing::info!(%service, watchdog_s = watchdog.as_ref().map(|w| w.interval.as_secs_f64() * 2.0), "serving");
     let mut stats = Stats::new(Duration::from_secs_f64(config.runtime.stats_interval_s));
     let mut last_cleanup = Instant::now();
     let mut source_ended = false;
@@ -118,6 +119,11 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
             }
             None => {}
         }
+        // Pinged from the frame loop itself, so a loop stuck in a frame (or anywhere) stops the
+        // pings and systemd restarts the service.
+        if let Some(watchdog) = watchdog.as_mut() {
+            watchdog.ping_if_due();
+        }
         if last_cleanup.elapsed() >= DEAD_PEER_CLEANUP {
             publisher.cleanup_dead_peers();
             last_cleanup = Instant::now();
@@ -151,6 +157,35 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
     match failure {
         Some(reason) => Err(reason),
         None => Ok(stats),
+    }
+}
+
+/// systemd's watchdog (`WatchdogSec=` in the unit): when enabled, `WATCHDOG=1` is sent at half
+/// the period systemd expects it.
+struct Watchdog {
+    interval: Duration,
+    last: Instant,
+}
+
+impl Watchdog {
+    /// `Some` when the service manager asked for pings (`WATCHDOG_USEC`, for this process).
+    fn from_env() -> Option<Self> {
+        let period = sd_notify::watchdog_enabled()?;
+        let watchdog = Watchdog {
+            interval: period / 2,
+            last: Instant::now(),
+        };
+        let _ = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]);
+        Some(watchdog)
+    }
+
+    fn ping_if_due(&mut self) {
+        if self.last.elapsed() >= self.interval {
+            if let Err(e) = sd_notify::notify(&[sd_notify::NotifyState::Watchdog]) {
+                tracing::warn!(error = %e, "cannot ping the systemd watchdog");
+            }
+            self.last = Instant::now();
+        }
     }
 }
 

@@ -310,3 +310,59 @@ fn a_second_daemon_on_the_same_service_refuses_to_start() {
     third.signal("-TERM");
     assert!(third.wait(STOP_WITHIN).expect("stops").success());
 }
+
+/// Under systemd (`Type=notify`, `WatchdogSec=`) the daemon says when it is ready and pings the
+/// watchdog from its frame loop at half the period systemd gives it; stopping, it says so.
+/// systemd is played by a datagram socket in `NOTIFY_SOCKET`, as the protocol defines it.
+#[test]
+fn the_daemon_notifies_systemd_and_pings_its_watchdog() {
+    use std::os::unix::net::UnixDatagram;
+    let tmp = tempfile::tempdir().unwrap();
+    let socket_path = tmp.path().join("notify.sock");
+    let socket = UnixDatagram::bind(&socket_path).unwrap();
+    socket
+        .set_read_timeout(Some(Duration::from_secs(60)))
+        .unwrap();
+    let log = tmp.path().join("deard.log");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_deard"))
+        .args(["--service", &unique_service("watchdog"), "--refine", "none"])
+        .arg("--replay")
+        .arg(demo())
+        .arg("--loop")
+        .env("NOTIFY_SOCKET", &socket_path)
+        // A 0.4 s watchdog: pings every 0.2 s.
+        .env("WATCHDOG_USEC", "400000")
+        .stdout(Stdio::null())
+        .stderr(File::create(&log).unwrap())
+        .spawn()
+        .expect("spawn deard");
+    let mut buf = [0u8; 4096];
+    let mut receive = || {
+        let n = socket.recv(&mut buf).expect("a notification");
+        String::from_utf8_lossy(&buf[..n]).into_owned()
+    };
+    let first = receive();
+    assert!(first.contains("READY=1"), "{first:?}");
+    let start = Instant::now();
+    let mut pings = 0;
+    while pings < 10 {
+        let message = receive();
+        assert!(message.contains("WATCHDOG=1"), "{message:?}");
+        pings += 1;
+    }
+    // Ten pings at 0.2 s take about 2 s; far fewer than 20 s, or the pings are not periodic.
+    let elapsed = start.elapsed();
+    assert!(elapsed < Duration::from_secs(20), "{elapsed:?}");
+    Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    loop {
+        let message = receive();
+        if message.contains("STOPPING=1") {
+            break;
+        }
+        assert!(message.contains("WATCHDOG=1"), "{message:?}");
+    }
+    assert!(child.wait().unwrap().success());
+}
