@@ -512,4 +512,3 @@ fn manifest_calibrations_beyond_f32_are_refused_by_field() {
         );
     }
 }
-

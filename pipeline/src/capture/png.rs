@@ -108,7 +108,7 @@ fn decode(
     file.seek(SeekFrom::Start(0))
         .map_err(|e| CaptureError::io(path, e))?;
     // Checked although the sides are bounded here: every size read from a file is.
-    let image_bytes = u64::from(w)
+    let budget = u64::from(w)
         .checked_mul(u64::from(h))
         .and_then(|n| n.checked_mul(u64::from(plane.color.bytes_per_pixel())))
         .and_then(|n| n.checked_add(METADATA_BUDGET))
@@ -118,7 +118,7 @@ fn decode(
     let mut limits = Limits::default();
     limits.max_image_width = Some(w);
     limits.max_image_height = Some(h);
-    limits.max_alloc = Some(image_bytes);
+    limits.max_alloc = Some(budget);
     let decoder =
         PngDecoder::with_limits(BufReader::new(file), limits).map_err(|e| decode_err(path, e))?;
     // `with_limits` has read the chunks before the pixel data, not the pixels: the colour type
