@@ -7,6 +7,32 @@ use std::path::{Path, PathBuf};
 use dear_pipeline::Calibration;
 use serde::{Deserialize, Serialize};
 
+/// Why a configuration cannot be used. Every message names the file (when there is one) and
+/// the key, and says what is allowed.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file cannot be read.
+    #[error("{}: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The text is not TOML, or has an unknown key or a value of the wrong type.
+    #[error("{0}")]
+    Parse(#[from] toml::de::Error),
+    /// A value parses but cannot work; the message names the key and the allowed values.
+    #[error("{0}")]
+    Invalid(String),
+    /// One of the above in a file.
+    #[error("{}: {source}", path.display())]
+    InFile {
+        path: PathBuf,
+        #[source]
+        source: Box<ConfigError>,
+    },
+}
+
 /// Largest `[capture] queue_depth`: a few frames absorb jitter; a longer queue only adds memory
 /// and latency (each waiting frame is a full RGB-D frame).
 pub const MAX_QUEUE_DEPTH: usize = 64;
@@ -14,6 +40,9 @@ pub const MAX_QUEUE_DEPTH: usize = 64;
 pub const MAX_SHARED_MEMORY_MB: u64 = 65_536;
 /// Longest `[runtime] stats_interval_s`: a day.
 pub const MAX_STATS_INTERVAL_S: f64 = 86_400.0;
+/// Shortest `[runtime] stats_interval_s`: a millisecond (a positive value below a nanosecond,
+/// e.g. `5e-324`, became a zero `Duration` and a statistics line per frame).
+pub const MIN_STATS_INTERVAL_S: f64 = 0.001;
 /// Largest `|t_x|`, `|t_y|` of `[pipeline] static_calibration`, px·m: a 10 cm baseline at a
 /// 10,000 px focal length. At start-up the bound tightens to the image size (see
 /// [`check_calibration_fits`]).
@@ -229,7 +258,8 @@ impl std::str::FromStr for NetworkPlacement {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RuntimeConfig {
-    /// Seconds between statistics lines in the log (0 < s ≤ [`MAX_STATS_INTERVAL_S`]).
+    /// Seconds between statistics lines in the log
+    /// ([`MIN_STATS_INTERVAL_S`] ≤ s ≤ [`MAX_STATS_INTERVAL_S`]).
     pub stats_interval_s: f64,
     /// Exit when a non-looping replay ends (otherwise keep the service up until signalled).
     pub exit_when_done: bool,
@@ -249,20 +279,31 @@ impl Default for RuntimeConfig {
 
 impl Config {
     /// Reads a TOML file; errors name the file and the offending key.
-    pub fn from_file(path: &Path) -> Result<Self, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        Self::from_toml(&text).map_err(|e| format!("{}: {e}", path.display()))
+    pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_toml(&text).map_err(|e| ConfigError::InFile {
+            path: path.to_path_buf(),
+            source: Box::new(e),
+        })
     }
 
     /// Parses TOML text.
-    pub fn from_toml(text: &str) -> Result<Self, String> {
-        let config: Config = toml::from_str(text).map_err(|e| e.to_string())?;
+    pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
+        let config: Config = toml::from_str(text)?;
         config.validate()?;
         Ok(config)
     }
 
     /// Checks values serde cannot. Errors name the key and the allowed values.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.check().map_err(ConfigError::Invalid)
+    }
+
+    /// [`validate`](Self::validate)'s checks, with the message of the first that fails.
+    fn check(&self) -> Result<(), String> {
         self.validate_service()?;
         let shm = self.service.max_shared_memory_mb;
         if !(1..=MAX_SHARED_MEMORY_MB).contains(&shm) {
@@ -310,9 +351,9 @@ impl Config {
         }
         let stats = self.runtime.stats_interval_s;
         // Written so that NaN fails too.
-        if !(stats > 0.0 && stats <= MAX_STATS_INTERVAL_S) {
+        if !(MIN_STATS_INTERVAL_S..=MAX_STATS_INTERVAL_S).contains(&stats) {
             return Err(format!(
-                "[runtime] stats_interval_s = {stats} must be within 0 < s <= {MAX_STATS_INTERVAL_S} seconds"
+                "[runtime] stats_interval_s = {stats} must be within {MIN_STATS_INTERVAL_S} <= s <= {MAX_STATS_INTERVAL_S} seconds"
             ));
         }
         Ok(())
@@ -363,7 +404,7 @@ pub fn check_calibration_fits(
     calibration: &Calibration,
     width: u32,
     height: u32,
-) -> Result<(), String> {
+) -> Result<(), ConfigError> {
     let (w, h) = (width as f32, height as f32);
     check_calibration(
         what,
@@ -372,6 +413,7 @@ pub fn check_calibration_fits(
         (w, h),
         &format!(" for the {width}x{height} image"),
     )
+    .map_err(ConfigError::Invalid)
 }
 
 /// `calibration` finite with `|t_x| ≤ t.0`, `|t_y| ≤ t.1`, `|c_x| ≤ c.0`, `|c_y| ≤ c.1`; the

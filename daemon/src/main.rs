@@ -87,7 +87,7 @@ fn parse_refine(s: &str) -> Result<RefineMode, String> {
     }
 }
 
-fn effective_config(cli: &Cli) -> Result<Config, String> {
+fn effective_config(cli: &Cli) -> Result<Config, deard::config::ConfigError> {
     let mut config = match &cli.config {
         Some(path) => Config::from_file(path)?,
         None => Config::default(),

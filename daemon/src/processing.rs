@@ -13,17 +13,65 @@ use std::time::{Duration, Instant};
 
 use dear_pipeline::align::StaticAligner;
 use dear_pipeline::dear::{
-    BackgroundCalibrator, ChainInput, ChainMode, ChainOutput, DearChain, RefinementCheck, Submit,
+    BackgroundCalibrator, ChainError, ChainInput, ChainMode, ChainOutput, DearChain,
+    RefinementCheck, Submit,
 };
 use dear_pipeline::filter::ClassicalRefiner;
 use dear_pipeline::geometry::LsqError;
-use dear_pipeline::model::ModelBundle;
+use dear_pipeline::model::{BundleError, ModelBundle};
 use dear_pipeline::online::{Measurement, NetworkTicket, OnlineCalibrator, OnlineConfig};
 use dear_pipeline::{Calibration, RgbdFrame};
 use dear_proto::{flags, FrameHeader, Stage};
 use ndarray::{Array2, ArrayViewMut2, ArrayViewMut3};
 
 use crate::config::{CalibrationMode, NetworkPlacement, PipelineConfig, RefineMode};
+
+/// Why the configured engine cannot be made.
+#[derive(Debug, thiserror::Error)]
+pub enum EngineError {
+    /// The bundle does not load or verify.
+    #[error("cannot load the model bundle {}: {source} (set [pipeline] bundle / --bundle, or run without networks: --refine classical)", dir.display())]
+    Load {
+        dir: std::path::PathBuf,
+        #[source]
+        source: BundleError,
+    },
+    /// The bundle's graphs cannot be prepared for the stream size.
+    #[error("cannot prepare the model bundle {} for {width}x{height}: {source}", dir.display())]
+    Prepare {
+        dir: std::path::PathBuf,
+        width: u32,
+        height: u32,
+        #[source]
+        source: BundleError,
+    },
+    /// The background calibration worker cannot be started.
+    #[error("cannot start the calibration worker thread: {0}")]
+    Worker(#[source] std::io::Error),
+}
+
+/// Why one frame could not be processed (the daemon skips and counts it).
+#[derive(Debug, thiserror::Error)]
+pub enum ProcessError {
+    /// The frame's planes do not have the stream's size.
+    #[error("frame {frame} is {width}x{height} (rgb {rgb:?}, amplitude {amplitude:?}), the stream is {stream_width}x{stream_height}")]
+    Size {
+        frame: u64,
+        width: usize,
+        height: usize,
+        rgb: (usize, usize, usize),
+        amplitude: (usize, usize),
+        stream_width: usize,
+        stream_height: usize,
+    },
+    /// The DEAR chain failed on the frame (a network error).
+    #[error("frame {frame}: {source}")]
+    Chain {
+        frame: u64,
+        #[source]
+        source: ChainError,
+    },
+}
 
 /// The output planes of one frame (views over the shared-memory payload).
 pub struct FrameOutput<'a> {
@@ -144,22 +192,28 @@ impl Processor {
         height: u32,
         calibration: Calibration,
         config: &PipelineConfig,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, EngineError> {
         match config.refine {
             RefineMode::Classical => return Ok(Self::new_static(width, height, calibration, true)),
             RefineMode::None => return Ok(Self::new_static(width, height, calibration, false)),
             RefineMode::Dear => {}
         }
         let dir = &config.bundle;
-        let bundle = ModelBundle::load(dir).map_err(|e| {
-            format!("cannot load the model bundle {}: {e} (set [pipeline] bundle / --bundle, or run without networks: --refine classical)", dir.display())
+        let bundle = ModelBundle::load(dir).map_err(|source| EngineError::Load {
+            dir: dir.clone(),
+            source,
         })?;
-        let chain = DearChain::new(&bundle, width as usize, height as usize).map_err(|e| {
-            format!(
-                "cannot prepare the model bundle {} for {width}x{height}: {e}",
-                dir.display()
-            )
-        })?;
+        let prepare = || {
+            DearChain::new(&bundle, width as usize, height as usize).map_err(|source| {
+                EngineError::Prepare {
+                    dir: dir.clone(),
+                    width,
+                    height,
+                    source,
+                }
+            })
+        };
+        let chain = prepare()?;
         let online = match config.calibration {
             CalibrationMode::Online => Some(OnlineCalibrator::new(OnlineConfig {
                 interval_frames: config.online_interval_frames,
@@ -171,15 +225,8 @@ impl Processor {
         let background = match (&online, config.online_network) {
             (Some(_), NetworkPlacement::Background) => {
                 // The worker's own chain: its buffers and tract states are its own.
-                let worker_chain = DearChain::new(&bundle, width as usize, height as usize)
-                    .map_err(|e| {
-                        format!(
-                            "cannot prepare the model bundle {} for {width}x{height}: {e}",
-                            dir.display()
-                        )
-                    })?;
-                let worker = BackgroundCalibrator::spawn(worker_chain, "deard-calibrate")
-                    .map_err(|e| format!("cannot start the calibration worker thread: {e}"))?;
+                let worker = BackgroundCalibrator::spawn(prepare()?, "deard-calibrate")
+                    .map_err(EngineError::Worker)?;
                 Some(worker)
             }
             _ => None,
@@ -221,22 +268,21 @@ impl Processor {
         frame: &RgbdFrame,
         header: &mut FrameHeader,
         mut out: FrameOutput<'_>,
-    ) -> Result<(), String> {
+    ) -> Result<(), ProcessError> {
         let (h, w) = frame.dim();
         if (h, w) != (self.height, self.width)
             || frame.rgb.dim() != (h, w, 3)
             || frame.amplitude.dim() != (h, w)
         {
-            return Err(format!(
-                "frame {} is {}x{} (rgb {:?}, amplitude {:?}), the stream is {}x{}",
-                frame.index,
-                w,
-                h,
-                frame.rgb.dim(),
-                frame.amplitude.dim(),
-                self.width,
-                self.height
-            ));
+            return Err(ProcessError::Size {
+                frame: frame.index,
+                width: w,
+                height: h,
+                rgb: frame.rgb.dim(),
+                amplitude: frame.amplitude.dim(),
+                stream_width: self.width,
+                stream_height: self.height,
+            });
         }
         out.rgb.assign(&frame.rgb);
         match &mut self.engine {
@@ -326,9 +372,13 @@ impl Processor {
                     depth: out.depth.view_mut(),
                     confidence: out.confidence.view_mut(),
                 };
-                let report = chain
-                    .process(input, mode, output)
-                    .map_err(|e| format!("frame {}: {e}", frame.index))?;
+                let report =
+                    chain
+                        .process(input, mode, output)
+                        .map_err(|source| ProcessError::Chain {
+                            frame: frame.index,
+                            source,
+                        })?;
                 // This frame's network measurement: inline, or delivered by the worker.
                 let network_measurement = report.measurement.as_ref().or(delivered.as_ref());
                 let fit = network_measurement.and_then(|m| m.as_ref().ok()).copied();

@@ -8,27 +8,61 @@ use std::time::{Duration, Instant};
 
 use dear_proto::{FrameHeader, Stage};
 
-use crate::capture::replay::ReplaySource;
+use crate::capture::replay::{ReplayOpenError, ReplaySource};
 use crate::capture::{FrameSource, SourceItem};
-use crate::config::{check_calibration_fits, Config, Pacing};
-use crate::processing::Processor;
+use crate::config::{check_calibration_fits, Config, ConfigError, Pacing};
+use crate::processing::{EngineError, Processor};
 use crate::publish::FramePublisher;
 use crate::queue::{FrameQueue, Overflow};
-use crate::shared_memory;
+use crate::shared_memory::{self, SharedMemoryError};
 use crate::stats::Stats;
 
 /// How often ports of dead subscribers are reclaimed.
 const DEAD_PEER_CLEANUP: Duration = Duration::from_secs(1);
 
+/// Why the daemon could not start, or stopped with an error.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// The capture cannot be opened.
+    #[error(transparent)]
+    Source(#[from] ReplayOpenError),
+    /// The static calibration cannot align a stream of this size.
+    #[error(transparent)]
+    Calibration(ConfigError),
+    /// The capture's own calibration cannot align its frames.
+    #[error("{source} (set [pipeline] static_calibration to override it)")]
+    CaptureCalibration {
+        #[source]
+        source: ConfigError,
+    },
+    /// The stream's shared memory cannot be had.
+    #[error("cannot serve {service:?}: {source}")]
+    SharedMemory {
+        service: String,
+        #[source]
+        source: SharedMemoryError,
+    },
+    /// The service cannot be opened or published on.
+    #[error("{0}")]
+    Publisher(String),
+    /// The processing engine cannot be made.
+    #[error(transparent)]
+    Engine(#[from] EngineError),
+    /// The source failed while running (e.g. a replay pass without one readable frame).
+    #[error("{0}")]
+    SourceFailed(String),
+}
+
 /// Runs the daemon until the source ends (with `exit_when_done`) or `shutdown` is raised.
 /// Returns the final statistics, or an error if it cannot start or the source fails (e.g. no
 /// frame of a replay can be read).
-pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> {
+pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError> {
     let source = ReplaySource::open(&config.capture)?;
     let (width, height) = source.size();
     let calibration = match config.pipeline.static_calibration {
         Some(calibration) => {
-            check_calibration_fits("[pipeline] static_calibration", &calibration, width, height)?;
+            check_calibration_fits("[pipeline] static_calibration", &calibration, width, height)
+                .map_err(RunError::Calibration)?;
             calibration
         }
         None => {
@@ -42,7 +76,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
                 width,
                 height,
             )
-            .map_err(|e| format!("{e} (set [pipeline] static_calibration to override it)"))?;
+            .map_err(|source| RunError::CaptureCalibration { source })?;
             calibration
         }
     };
@@ -55,8 +89,11 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
         config.service.max_shared_memory_mb,
         std::path::Path::new(shared_memory::SHM_DIR),
     )
-    .map_err(|e| format!("cannot serve {service:?}: {e}"))?;
-    let publisher = FramePublisher::new(&service, width, height)?;
+    .map_err(|source| RunError::SharedMemory {
+        service: service.clone(),
+        source,
+    })?;
+    let publisher = FramePublisher::new(&service, width, height).map_err(RunError::Publisher)?;
     let mut processor = Processor::from_config(width, height, calibration, &config.pipeline)?;
     let overflow = match config.capture.pacing {
         Pacing::Timestamps => Overflow::DropOldest,
@@ -85,7 +122,9 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
                 header.frames_skipped = stats.skipped;
                 header.frames_dropped = queue.dropped();
                 match publisher.publish(header, arrived, |h, out| {
-                    processor.process_into(&frame, h, out)
+                    processor
+                        .process_into(&frame, h, out)
+                        .map_err(|e| e.to_string())
                 }) {
                     Ok(sent) => stats.record(&sent),
                     Err(reason) => {
@@ -155,7 +194,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, String> 
         "stopped"
     );
     match failure {
-        Some(reason) => Err(reason),
+        Some(reason) => Err(RunError::SourceFailed(reason)),
         None => Ok(stats),
     }
 }

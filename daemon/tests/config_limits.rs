@@ -9,7 +9,7 @@ use deard::config::Config;
 fn rejected(toml: &str) -> String {
     match Config::from_toml(toml) {
         Ok(config) => panic!("accepted {toml:?} as {config:?}"),
-        Err(e) => e,
+        Err(e) => e.to_string(),
     }
 }
 
@@ -34,7 +34,9 @@ fn queue_depth_is_bounded() {
 
 #[test]
 fn stats_interval_must_be_finite_positive_and_at_most_a_day() {
-    for s in ["1e20", "86401.0", "inf", "nan", "0.0", "-1.0"] {
+    for s in [
+        "1e20", "86401.0", "inf", "nan", "0.0", "-1.0", "5e-324", "0.0009",
+    ] {
         let err = rejected(&format!("[runtime]\nstats_interval_s = {s}\n"));
         assert!(
             err.contains("stats_interval_s") && err.contains("86400"),

@@ -299,14 +299,10 @@ fn a_second_daemon_on_the_same_service_refuses_to_start() {
         &["--loop"],
         &tmp.path().join("third.log"),
     );
+    // Serving proves the killed daemon's publisher no longer counts. (Who removed it is not
+    // asserted: any iceoryx2 node created meanwhile — a client, another test's daemon — cleans
+    // up dead nodes too.)
     third.wait_for_log("serving", Duration::from_secs(60));
-    assert!(
-        third
-            .log_text()
-            .contains("removed the shared-memory resources of dead processes"),
-        "{}",
-        third.log_text()
-    );
     third.signal("-TERM");
     assert!(third.wait(STOP_WITHIN).expect("stops").success());
 }

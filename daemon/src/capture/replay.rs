@@ -4,11 +4,29 @@
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use dear_pipeline::capture::CaptureDir;
+use dear_pipeline::capture::{CaptureDir, CaptureError};
 use dear_pipeline::Calibration;
 
 use super::{sleep_unless, FrameSource, SourceItem};
 use crate::config::{CaptureConfig, Pacing};
+
+/// Why a capture directory cannot be replayed.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayOpenError {
+    /// The directory or its `capture.json` cannot be read or is invalid.
+    #[error("cannot replay: {0}")]
+    Capture(#[from] CaptureError),
+    /// The capture lists no frame.
+    #[error("cannot replay {}: the capture has no frames", path.display())]
+    Empty { path: std::path::PathBuf },
+    /// `[capture] start` is at or after the end.
+    #[error("cannot replay {}: start = {start} is not before the end ({end} frames)", path.display())]
+    EmptyRange {
+        path: std::path::PathBuf,
+        start: usize,
+        end: usize,
+    },
+}
 
 /// A [`FrameSource`] over a capture directory.
 pub struct ReplaySource {
@@ -28,21 +46,20 @@ pub struct ReplaySource {
 
 impl ReplaySource {
     /// Opens and validates the capture directory named by the config.
-    pub fn open(config: &CaptureConfig) -> Result<Self, String> {
-        let dir = CaptureDir::open(&config.path).map_err(|e| format!("cannot replay: {e}"))?;
+    pub fn open(config: &CaptureConfig) -> Result<Self, ReplayOpenError> {
+        let dir = CaptureDir::open(&config.path)?;
         if dir.is_empty() {
-            return Err(format!(
-                "cannot replay {}: the capture has no frames",
-                config.path.display()
-            ));
+            return Err(ReplayOpenError::Empty {
+                path: config.path.clone(),
+            });
         }
         let end = config.end.unwrap_or(dir.len()).min(dir.len());
         if config.start >= end {
-            return Err(format!(
-                "cannot replay {}: start = {} is not before the end ({end} frames)",
-                config.path.display(),
-                config.start
-            ));
+            return Err(ReplayOpenError::EmptyRange {
+                path: config.path.clone(),
+                start: config.start,
+                end,
+            });
         }
         Ok(ReplaySource {
             dir,

@@ -196,7 +196,8 @@ fn run(cli: &Cli) -> Result<(), String> {
             online_network: cli.online_network,
             ..PipelineConfig::default()
         };
-        let mut processor = Processor::from_config(width, height, calibration, &config)?;
+        let mut processor = Processor::from_config(width, height, calibration, &config)
+            .map_err(|e| e.to_string())?;
         let period = (cli.fps > 0.0).then(|| std::time::Duration::from_secs_f64(1.0 / cli.fps));
         let report = measure(
             &mut processor,
@@ -270,7 +271,9 @@ fn measure(
             confidence: confidence.view_mut(),
         };
         let start = Instant::now();
-        processor.process_into(frame, &mut header, out)?;
+        processor
+            .process_into(frame, &mut header, out)
+            .map_err(|e| e.to_string())?;
         let ms = start.elapsed().as_secs_f64() * 1e3;
         if i < warmup {
             continue;
