@@ -17,6 +17,27 @@ fn accepted(toml: &str) -> Config {
     Config::from_toml(toml).unwrap_or_else(|e| panic!("rejected {toml:?}: {e}"))
 }
 
+/// Runs `deard` on `samples/demo` with the configuration `toml` on a service of its own
+/// (`test` names it), expecting it to fail at start-up; returns its stderr.
+fn start_failure(toml: &str, test: &str) -> String {
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("deard.toml");
+    std::fs::write(&file, toml).unwrap();
+    let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
+    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
+        .args(["--config", file.to_str().unwrap(), "--replay", demo])
+        .args([
+            "--service",
+            &format!("dear-test/{}/{test}/frames", std::process::id()),
+            "--exit-when-done",
+        ])
+        .output()
+        .expect("run deard");
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "deard started with {toml:?}: {err}");
+    err
+}
+
 #[test]
 fn queue_depth_is_bounded() {
     for depth in ["0", "65", "100000", "9223372036854775807"] {
@@ -132,25 +153,10 @@ fn the_binary_names_a_bad_key_once() {
 #[test]
 fn a_static_calibration_beyond_the_image_is_a_startup_error() {
     // samples/demo is 320x240: a principal-point offset of 300 px vertically leaves no overlap.
-    let tmp = tempfile::tempdir().unwrap();
-    let file = tmp.path().join("deard.toml");
-    std::fs::write(
-        &file,
+    let err = start_failure(
         "[pipeline]\nrefine = \"none\"\nstatic_calibration = { tx = 0.0, ty = 0.0, cx = 0.0, cy = 300.0 }\n",
-    )
-    .unwrap();
-    let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
-    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
-        .args(["--config", file.to_str().unwrap(), "--replay", demo])
-        .args([
-            "--service",
-            &format!("dear-test/{}/calib-range/frames", std::process::id()),
-            "--exit-when-done",
-        ])
-        .output()
-        .expect("run deard");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
+        "calib-range",
+    );
     assert!(
         err.contains("static_calibration.cy = 300") && err.contains("240"),
         "{err}"
@@ -199,23 +205,10 @@ fn max_shared_memory_is_bounded_and_enforced_at_start() {
     }
     assert_eq!(accepted("").service.max_shared_memory_mb, 1024);
     // samples/demo (320x240) needs 21.5 MB: a 10 MB limit refuses it before any is taken.
-    let tmp = tempfile::tempdir().unwrap();
-    let file = tmp.path().join("deard.toml");
-    std::fs::write(&file, "[service]\nmax_shared_memory_mb = 10\n").unwrap();
-    let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
-    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
-        .args(["--config", file.to_str().unwrap(), "--replay", demo])
-        .args([
-            "--refine",
-            "none",
-            "--service",
-            &format!("dear-test/{}/shm-limit/frames", std::process::id()),
-            "--exit-when-done",
-        ])
-        .output()
-        .expect("run deard");
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "{err}");
+    let err = start_failure(
+        "[pipeline]\nrefine = \"none\"\n[service]\nmax_shared_memory_mb = 10\n",
+        "shm-limit",
+    );
     assert!(
         err.contains("320x240 stream needs 21.5 MB of shared memory")
             && err.contains("max_shared_memory_mb = 10"),
