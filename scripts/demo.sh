@@ -3,7 +3,7 @@
 # Writes a few received frames (with colourised depth and RGB blends) to out/demo/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/setup.sh
+scripts/setup.sh --rust-only
 cargo build --release --quiet -p deard -p dear-client
 
 capture=${DEAR_DEMO_CAPTURE:-samples/demo}

@@ -2,8 +2,23 @@
 # Installs what the project needs on a fresh Debian/Ubuntu machine: Rust lint components (when
 # missing), system packages, and the Python virtual environment of train/ (.venv). Idempotent:
 # a second run only checks.
+#
+#   scripts/setup.sh              everything (what scripts/test.sh needs)
+#   scripts/setup.sh --rust-only  only what building the Rust workspace needs (scripts/demo.sh):
+#                                 no Python packages, no PyTorch
+#
+# PyTorch: the CPU build (download.pytorch.org/whl/cpu, about 0.2 GB) unless DEAR_TORCH=cuda,
+# which takes PyPI's default wheel with its CUDA libraries (about 6.8 GB). When the CPU index
+# cannot be reached, PyPI's wheel is installed and the script says so.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+rust_only=false
+case "${1:-}" in
+    "") ;;
+    --rust-only) rust_only=true ;;
+    *) echo "setup: unknown option $1 (expected --rust-only or nothing)" >&2; exit 2 ;;
+esac
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 
@@ -17,9 +32,11 @@ for component in rustfmt clippy; do
     fi
 done
 
-# System packages: a C toolchain for -sys crates, pkg-config, Python's venv module.
+# System packages: a C toolchain for -sys crates, pkg-config, and (for train/) Python's venv.
+packages=(build-essential pkg-config)
+$rust_only || packages+=(python3-venv)
 missing=()
-for pkg in build-essential pkg-config python3-venv; do
+for pkg in "${packages[@]}"; do
     dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
 done
 if [ ${#missing[@]} -gt 0 ] && command -v apt-get >/dev/null; then
@@ -29,7 +46,7 @@ if [ ${#missing[@]} -gt 0 ] && command -v apt-get >/dev/null; then
 fi
 
 # Python environment for train/ (re-installed only when train/pyproject.toml changes).
-if [ -d train ]; then
+if ! $rust_only && [ -d train ]; then
     stamp=.venv/.dear-train-installed
     want=$(sha256sum train/pyproject.toml | cut -d' ' -f1)
     if [ ! -x .venv/bin/python ]; then
@@ -38,6 +55,16 @@ if [ -d train ]; then
     if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
         echo "setup: installing the train/ package and its pinned dependencies into .venv"
         .venv/bin/pip install --quiet --upgrade pip
+        torch=$(grep -o '"torch==[^"]*"' train/pyproject.toml | tr -d '"')
+        if [ "${DEAR_TORCH:-cpu}" = cuda ]; then
+            echo "setup: DEAR_TORCH=cuda: $torch from PyPI (with its CUDA libraries)"
+        elif .venv/bin/pip install --quiet --timeout 20 --retries 1 \
+                --index-url https://download.pytorch.org/whl/cpu "$torch" 2>/dev/null; then
+            echo "setup: $torch, CPU build"
+        else
+            echo "setup: download.pytorch.org/whl/cpu cannot be reached: $torch from PyPI" \
+                 "(its default wheel brings the CUDA libraries, about 6.8 GB)"
+        fi
         .venv/bin/pip install --quiet -e 'train[dev]'
         echo "$want" > "$stamp"
     fi
