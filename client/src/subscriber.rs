@@ -2,7 +2,7 @@
 
 use std::time::{Duration, Instant};
 
-use dear_proto::service::{frame_event_service, frame_service};
+use dear_proto::service::{frame_event_service, frame_service, node_config, NodeConfigError};
 use dear_proto::{EventServiceError, FrameHeader, FrameServiceError};
 use iceoryx2::node::NodeCreationFailure;
 use iceoryx2::port::listener::{Listener, ListenerCreateError, ListenerWaitError};
@@ -15,11 +15,21 @@ use crate::frame::{Frame, FrameError};
 /// the [`source`](std::error::Error::source).
 #[derive(Debug, thiserror::Error)]
 pub enum ConnectError {
-    #[error("cannot connect to {service:?}: cannot create an iceoryx2 node")]
+    /// `root` is iceoryx2's root directory this process used ([`node_config`]): a client
+    /// that cannot write there (another user's service) fails here.
+    #[error("cannot connect to {service:?}: cannot create an iceoryx2 node under {root}")]
     Node {
         service: String,
+        root: String,
         #[source]
         source: NodeCreationFailure,
+    },
+    /// `DEAR_IOX2_ROOT` is set to something that cannot be iceoryx2's root.
+    #[error("cannot connect to {service:?}")]
+    Root {
+        service: String,
+        #[source]
+        source: NodeConfigError,
     },
     /// A bad service name, or the service exists with another contract (QoS, header type).
     #[error("cannot connect to {service:?}")]
@@ -97,12 +107,19 @@ impl Client {
     /// running yet; frames arrive once it publishes.
     pub fn connect(service: &str) -> Result<Self, ConnectError> {
         let name = || service.to_string();
+        // The daemon's iceoryx2 root: $DEAR_IOX2_ROOT, else /tmp/iceoryx2 (node_config).
+        let config = node_config().map_err(|source| ConnectError::Root {
+            service: name(),
+            source,
+        })?;
         let node = NodeBuilder::new()
+            .config(&config)
             // The application owns its signals; iceoryx2 must not install handlers of its own.
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
             .map_err(|source| ConnectError::Node {
                 service: name(),
+                root: config.global.root_path().to_string(),
                 source,
             })?;
         // A crashed process may have left ports behind; they would hold queue slots.

@@ -35,16 +35,21 @@ pub struct FramePublisher {
 impl FramePublisher {
     /// Creates the node, cleans up what crashed processes left behind, and opens the services.
     pub fn new(name: &str, width: u32, height: u32) -> Result<Self, String> {
+        // The root every client uses too (DEAR_IOX2_ROOT; the unit sets /run/deard/iceoryx2).
+        let mut config = dear_proto::service::node_config().map_err(|e| e.to_string())?;
         // The dead-node cleanup that iceoryx2 runs inside `create` reports nothing; turned off
         // there, the explicit one below can say what it removed (it logged `cleanups: 0` after
         // `create` had already removed everything).
-        let mut config = iceoryx2::config::Config::global_config().clone();
         config.global.node.cleanup_dead_nodes_on_creation = false;
+        tracing::info!(root = %config.global.root_path(), "iceoryx2");
         let node = NodeBuilder::new()
             .config(&config)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
-            .map_err(|e| format!("cannot create the iceoryx2 node: {e:?}"))?;
+            .map_err(|e| {
+                let root = config.global.root_path();
+                format!("cannot create the iceoryx2 node under {root}: {e:?}")
+            })?;
         log_cleanup(node.try_cleanup_dead_nodes(), "at start");
         let frames = frame_service(&node, name).map_err(|e| error_chain(&e))?;
         let events = frame_event_service(&node, name).map_err(|e| error_chain(&e))?;

@@ -28,7 +28,9 @@ pub struct FrameServiceInfo {
 /// process as one more node (not as a publisher or subscriber) for the moment it looks.
 pub fn frame_services() -> anyhow::Result<Vec<FrameServiceInfo>> {
     let mut found = Vec::new();
-    ipc::Service::list(Config::global_config(), |details| {
+    // The daemon's iceoryx2 root: $DEAR_IOX2_ROOT, else /tmp/iceoryx2 (node_config).
+    let config = dear_proto::service::node_config()?;
+    ipc::Service::list(&config, |details| {
         if let Pattern::PublishSubscribe(pubsub) = details.static_details.messaging_pattern() {
             let header = pubsub.message_type_details().user_header.type_name();
             if *header == FRAME_HEADER_TYPE_NAME {
@@ -48,11 +50,17 @@ pub fn frame_services() -> anyhow::Result<Vec<FrameServiceInfo>> {
         }
         CallbackProgression::Continue
     })
-    .map_err(|e| anyhow::anyhow!("cannot list the iceoryx2 services: {e:?}"))?;
+    .map_err(|e| {
+        anyhow::anyhow!(
+            "cannot list the iceoryx2 services under {}: {e:?}",
+            config.global.root_path()
+        )
+    })?;
     if found.is_empty() {
         return Ok(found);
     }
     let node = NodeBuilder::new()
+        .config(&config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
         .map_err(|e| anyhow::anyhow!("cannot create an iceoryx2 node: {e:?}"))?;
