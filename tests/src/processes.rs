@@ -77,6 +77,41 @@ impl Daemon {
     pub fn log_text(&self) -> String {
         std::fs::read_to_string(&self.log).unwrap_or_default()
     }
+
+    /// The first log line containing `needle`, waiting up to `timeout` for it to be written.
+    pub fn wait_for_log_line(&self, needle: &str, timeout: Duration) -> Option<String> {
+        let deadline = std::time::Instant::now() + timeout;
+        loop {
+            if let Some(line) = self.log_text().lines().find(|l| l.contains(needle)) {
+                return Some(line.to_string());
+            }
+            if std::time::Instant::now() >= deadline {
+                return None;
+            }
+            thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// The counters of the replay, from the `source finished` line `deard` logs when a
+    /// non-looping replay has been published (it keeps serving afterwards), waiting up to
+    /// `timeout`. Panics with the log if the line does not come.
+    pub fn wait_source_finished(&self, timeout: Duration) -> Counts {
+        let line = self
+            .wait_for_log_line("source finished", timeout)
+            .unwrap_or_else(|| panic!("deard did not finish its replay:\n{}", self.log_text()));
+        Counts::parse(&line).unwrap_or_else(|| panic!("no counters in {line:?}"))
+    }
+
+    /// The final counters, from the `stopped` line `deard` logs as it exits (call after
+    /// [`Daemon::terminate`]). Panics with the log if there is none.
+    pub fn final_counts(&self) -> Counts {
+        let log = self.log_text();
+        log.lines()
+            .rev()
+            .find(|l| l.contains("stopped published="))
+            .and_then(Counts::parse)
+            .unwrap_or_else(|| panic!("no final statistics in the deard log:\n{log}"))
+    }
 }
 
 impl Drop for Daemon {
@@ -93,10 +128,14 @@ pub struct Probe {
     lines: mpsc::Receiver<String>,
 }
 
-/// One frame as a probe saw it.
+/// One frame as a probe saw it (one line of `dear-probe`'s output).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Seen {
     pub frame_id: u64,
+    /// `FrameHeader::run_id`: the publisher instance that sent the frame.
+    pub run_id: u64,
+    /// `FrameHeader::sequence`: samples that publisher instance sent before this one.
+    pub sequence: u64,
     pub skipped: u64,
     pub dropped: u64,
     pub sha256: String,
@@ -107,8 +146,14 @@ pub struct Seen {
 }
 
 impl Probe {
-    /// Starts a probe expecting `count` frames and waits until it has subscribed.
+    /// Starts a probe expecting `count` frames and waits until it has subscribed. The probe
+    /// exits after `count` frames or 300 s, or is killed when dropped.
     pub fn start(service: &str, count: usize) -> Probe {
+        Probe::start_with_delay(service, count, Duration::ZERO)
+    }
+
+    /// [`Probe::start`] for a slow client: the probe sleeps `delay` after each frame.
+    pub fn start_with_delay(service: &str, count: usize, delay: Duration) -> Probe {
         let mut child = Command::new(binary("dear-probe"))
             .args([
                 "--service",
@@ -116,7 +161,9 @@ impl Probe {
                 "--count",
                 &count.to_string(),
                 "--timeout-s",
-                "60",
+                "300",
+                "--delay-ms",
+                &delay.as_millis().to_string(),
             ])
             .stdout(Stdio::piped())
             .spawn()
@@ -134,20 +181,33 @@ impl Probe {
     /// The next frame line, waiting up to `timeout`.
     pub fn next(&self, timeout: Duration) -> Option<Seen> {
         let line = self.lines.recv_timeout(timeout).ok()?;
-        let parts: Vec<&str> = line.split_whitespace().collect();
-        assert_eq!(parts.len(), 7, "bad probe line {line:?}");
-        assert_eq!(parts[0], "frame");
-        Some(Seen {
-            frame_id: parts[1].parse().unwrap(),
-            skipped: parts[2].parse().unwrap(),
-            dropped: parts[3].parse().unwrap(),
-            sha256: parts[4].to_string(),
-            flags: u32::from_str_radix(parts[5], 16).unwrap(),
-            bundle: parts[6].to_string(),
-        })
+        Some(parse_frame_line(&line))
+    }
+
+    /// Collects frames until `done` holds for the frames so far (checked after each frame) or
+    /// no frame arrives for `quiet`, and returns them. For streams that may lose frames: the
+    /// frame service overwrites a slow subscriber's oldest samples, so a test cannot wait for a
+    /// number of frames; it waits for the frame that ends the stream (the newest sample is
+    /// never overwritten, so the publisher's last one always arrives) and then checks what came
+    /// against what the publisher says it sent. `quiet` only ends a stream that is broken.
+    pub fn collect_until(
+        &self,
+        mut done: impl FnMut(&[Seen]) -> bool,
+        quiet: Duration,
+    ) -> Vec<Seen> {
+        let mut seen = Vec::new();
+        while let Some(s) = self.next(quiet) {
+            seen.push(s);
+            if done(&seen) {
+                break;
+            }
+        }
+        seen
     }
 
     /// Collects `n` frames, failing the test if they do not all come within `timeout` each.
+    /// Only where `n` frames must arrive whatever is lost (e.g. a looping daemon); the frame
+    /// service does not promise every frame to a subscriber (see [`Probe::collect_until`]).
     pub fn take(&self, n: usize, timeout: Duration) -> Vec<Seen> {
         (0..n)
             .map(|i| {
@@ -176,6 +236,91 @@ impl Drop for Probe {
         if matches!(self.child.try_wait(), Ok(None)) {
             self.crash();
         }
+    }
+}
+
+/// Parses one frame line of `dear-probe` (format in its doc comment); panics on anything else.
+pub fn parse_frame_line(line: &str) -> Seen {
+    let parts: Vec<&str> = line.split_whitespace().collect();
+    assert!(
+        parts.len() == 9 && parts[0] == "frame",
+        "bad probe line {line:?}"
+    );
+    let number = |i: usize| -> u64 {
+        parts[i]
+            .parse()
+            .unwrap_or_else(|e| panic!("field {i} of probe line {line:?}: {e}"))
+    };
+    Seen {
+        frame_id: number(1),
+        run_id: u64::from_str_radix(parts[2], 16)
+            .unwrap_or_else(|e| panic!("run id of probe line {line:?}: {e}")),
+        sequence: number(3),
+        skipped: number(4),
+        dropped: number(5),
+        sha256: parts[6].to_string(),
+        flags: u32::from_str_radix(parts[7], 16)
+            .unwrap_or_else(|e| panic!("flags of probe line {line:?}: {e}")),
+        bundle: parts[8].to_string(),
+    }
+}
+
+/// The frames of `seen` split where the `run_id` changes: one slice per stretch of frames from
+/// one publisher instance, in the order received.
+pub fn split_runs(seen: &[Seen]) -> Vec<&[Seen]> {
+    seen.chunk_by(|a, b| a.run_id == b.run_id).collect()
+}
+
+/// Samples of one run a client lost, from the sequence numbers it received: those before the
+/// first received (a run starts at 0) and in every gap. With the frames received this
+/// accounts for every sample up to the last received one (`received + lost = last + 1`).
+/// Panics unless `frames` is one run with strictly increasing sequence numbers.
+pub fn lost_by_sequence(frames: &[Seen]) -> u64 {
+    let Some(first) = frames.first() else {
+        return 0;
+    };
+    let mut lost = first.sequence;
+    for pair in frames.windows(2) {
+        let (a, b) = (&pair[0], &pair[1]);
+        assert_eq!(a.run_id, b.run_id, "one run at a time");
+        assert!(
+            b.sequence > a.sequence,
+            "sequence {} after {} in run {:016x}: reordered or duplicated",
+            b.sequence,
+            a.sequence,
+            a.run_id
+        );
+        lost += b.sequence - a.sequence - 1;
+    }
+    lost
+}
+
+/// Counters from a `deard` statistics line (`published=… skipped=… dropped=…`, as `deard` logs
+/// them when stderr is not a terminal).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Counts {
+    /// Samples sent (`FrameHeader::sequence` of the last one + 1 when no send failed).
+    pub published: u64,
+    /// Input frames refused as bad.
+    pub skipped: u64,
+    /// Input frames the capture queue dropped because processing fell behind.
+    pub dropped: u64,
+}
+
+impl Counts {
+    /// The counters of a log line, `None` if it lacks one of them.
+    pub fn parse(line: &str) -> Option<Counts> {
+        let field = |key: &str| -> Option<u64> {
+            line.split_whitespace()
+                .find_map(|word| word.strip_prefix(key)?.strip_prefix('='))?
+                .parse()
+                .ok()
+        };
+        Some(Counts {
+            published: field("published")?,
+            skipped: field("skipped")?,
+            dropped: field("dropped")?,
+        })
     }
 }
 

@@ -1,13 +1,28 @@
 //! `dear-probe`: a minimal client process for the end-to-end tests. Subscribes, prints `ready`,
 //! then one line per received frame:
-//! `frame <id> <skipped> <dropped> <sha256 of the payload> <flags, hex> <bundle name or ->`.
-//! Exits 0 after `--count` frames, 3 if `--timeout-s` passes first.
+//!
+//! `frame <frame_id> <run_id, 16 hex digits> <sequence> <skipped> <dropped> <sha256 of the
+//! payload> <flags, hex> <bundle name or ->`
+//!
+//! (`run_id` and `sequence` as the header carries them: a new `run_id` is a new publisher
+//! instance, a gap in `sequence` within one run is the number of samples this probe lost.)
+//! Exits 0 after `--count` frames, 3 if `--timeout-s` passes first. `--delay-ms` makes it a
+//! slow client: it sleeps that long after each frame before it reads the next.
+//!
+//! The probe keeps up with the daemon as well as a client can: the frame service overwrites
+//! the oldest sample of a subscriber that falls two samples behind
+//! (`dear_proto::service::QOS_SUBSCRIBER_BUFFER`), so one thread only copies each payload out
+//! of shared memory and returns the sample, and another hashes and prints. A loss can then only
+//! come from the receiving thread not being scheduled for two publish intervals.
 
 use std::io::Write;
+use std::sync::mpsc;
+use std::thread;
 use std::time::{Duration, Instant};
 
 use clap::Parser;
 use dear_client::Client;
+use dear_proto::FrameHeader;
 
 #[derive(Parser)]
 struct Args {
@@ -17,6 +32,8 @@ struct Args {
     count: usize,
     #[arg(long, default_value_t = 60.0)]
     timeout_s: f64,
+    #[arg(long, default_value_t = 0)]
+    delay_ms: u64,
 }
 
 fn main() {
@@ -26,46 +43,69 @@ fn main() {
         eprintln!("dear-probe: {e}");
         std::process::exit(2)
     });
-    let mut out = std::io::stdout().lock();
-    writeln!(out, "ready").unwrap();
-    out.flush().unwrap();
+    // Before the printing thread starts: it holds the stdout lock for its whole life.
+    {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "ready").unwrap();
+        out.flush().unwrap();
+    }
+    // Received frames, copied out of shared memory, to the hashing and printing thread.
+    let (tx, rx) = mpsc::channel::<(FrameHeader, Vec<u8>)>();
+    let printer = thread::spawn(move || {
+        let mut out = std::io::stdout().lock();
+        for (h, payload) in rx {
+            let hash = dear_e2e_tests::sha256_hex(&payload);
+            writeln!(
+                out,
+                "frame {} {:016x} {} {} {} {hash} {:x} {}",
+                h.frame_id,
+                h.run_id,
+                h.sequence,
+                h.frames_skipped,
+                h.frames_dropped,
+                h.flags,
+                if h.bundle_name().is_empty() {
+                    "-"
+                } else {
+                    h.bundle_name()
+                }
+            )
+            .unwrap();
+            out.flush().unwrap();
+        }
+    });
     let deadline = Instant::now() + Duration::from_secs_f64(args.timeout_s);
     let mut received = 0;
-    while received < args.count {
+    let status = loop {
+        if received >= args.count {
+            break 0;
+        }
         let left = deadline.saturating_duration_since(Instant::now());
         if left.is_zero() {
             eprintln!(
                 "dear-probe: timed out after {received} of {} frames",
                 args.count
             );
-            std::process::exit(3);
+            break 3;
         }
         match client.wait(left) {
             Ok(Some(frame)) => {
-                let h = frame.header();
-                let hash = dear_e2e_tests::sha256_hex(frame.payload());
-                writeln!(
-                    out,
-                    "frame {} {} {} {hash} {:x} {}",
-                    h.frame_id,
-                    h.frames_skipped,
-                    h.frames_dropped,
-                    h.flags,
-                    if h.bundle_name().is_empty() {
-                        "-"
-                    } else {
-                        h.bundle_name()
-                    }
-                )
-                .unwrap();
-                out.flush().unwrap();
+                // The copy releases the sample at once (the frame is dropped here).
+                tx.send((*frame.header(), frame.payload().to_vec()))
+                    .expect("the printing thread runs until the channel closes");
                 received += 1;
+                // A slow client: the service keeps queueing (and overwriting) meanwhile.
+                thread::sleep(Duration::from_millis(args.delay_ms));
             }
             Ok(None) => {}
             Err(e) => {
                 eprintln!("dear-probe: {e}");
-                std::process::exit(2);
+                break 2;
             }
         }
-    }
+    };
+    // Every received frame is printed before the probe exits, whatever the status.
+    drop(tx);
+    printer.join().expect("the printing thread");
+    std::process::exit(status);
 }
