@@ -143,7 +143,7 @@ fn main() -> ExitCode {
     let config = match effective_config(&cli) {
         Ok(config) => config,
         Err(e) => {
-            eprintln!("deard: configuration error: {e}");
+            eprintln!("deard: configuration error: {}", error_chain(&e));
             return ExitCode::from(2);
         }
     };
@@ -178,6 +178,7 @@ fn main() -> ExitCode {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
             // Once: in the log when errors are logged (both go to stderr), else on stderr.
+            let e = error_chain(&e);
             if tracing::enabled!(tracing::Level::ERROR) {
                 tracing::error!("{e}");
             } else {
@@ -186,4 +187,21 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// `e` and its sources as one line (`a: b: c`), so the iceoryx2 or I/O reason under an error is
+/// not lost; a source whose text the line already holds (most messages name their cause) is not
+/// repeated.
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut text = e.to_string();
+    let mut source = e.source();
+    while let Some(s) = source {
+        let more = s.to_string();
+        if !text.contains(&more) {
+            text.push_str(": ");
+            text.push_str(&more);
+        }
+        source = s.source();
+    }
+    text
 }

@@ -5,14 +5,95 @@
 use std::cell::Cell;
 use std::time::Instant;
 
-use dear_proto::service::{frame_event_service, frame_service, FrameEventService, FrameService};
-use dear_proto::{FrameHeader, PayloadLayout, Stage};
+use dear_proto::service::{
+    frame_event_service, frame_service, EventServiceError, FrameEventService, FrameService,
+    FrameServiceError, NodeConfigError,
+};
+use dear_proto::{FrameHeader, LayoutError, PayloadLayout, Stage};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
 use ndarray::{ArrayViewMut2, ArrayViewMut3};
 
 use crate::processing::{micros, FrameOutput};
+
+/// Why the publishing end of a frame service cannot be made.
+#[derive(Debug, thiserror::Error)]
+pub enum PublisherError {
+    /// `DEAR_IOX2_ROOT` is not a usable root.
+    #[error(transparent)]
+    NodeConfig(#[from] NodeConfigError),
+    /// iceoryx2 cannot create the node (e.g. its root directory is not writable).
+    #[error("cannot create the iceoryx2 node under {root}: {source:?}")]
+    Node {
+        root: String,
+        #[source]
+        source: iceoryx2::node::NodeCreationFailure,
+    },
+    /// The frame service cannot be opened or created.
+    #[error(transparent)]
+    Service(#[from] FrameServiceError),
+    /// The event service cannot be opened or created.
+    #[error(transparent)]
+    Events(#[from] EventServiceError),
+    /// The frame is larger than the protocol can describe.
+    #[error("cannot publish on {service:?}: {source}")]
+    Layout {
+        service: String,
+        #[source]
+        source: LayoutError,
+    },
+    /// The publisher port cannot be created (e.g. the service has no publisher slot left).
+    #[error("cannot create a publisher on {service:?}: {source:?}")]
+    Publisher {
+        service: String,
+        #[source]
+        source: iceoryx2::port::publisher::PublisherCreateError,
+    },
+    /// The notifier port cannot be created.
+    #[error("cannot create a notifier on {service:?}: {source:?}")]
+    Notifier {
+        service: String,
+        #[source]
+        source: iceoryx2::port::notifier::NotifierCreateError,
+    },
+    /// Another live process publishes on the service.
+    #[error("another process already publishes on {service:?} (pid {pids}): one deard per service; stop it, or give this one another [service] camera / --camera")]
+    SecondPublisher { service: String, pids: String },
+    /// The kernel gave no random run id.
+    #[error("cannot draw a run id for {service:?} (getrandom): {source}")]
+    RunId {
+        service: String,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Why one frame was not published (the daemon skips and counts it). `E` is the error of the
+/// function that fills the sample.
+#[derive(Debug, thiserror::Error)]
+pub enum PublishError<E: std::error::Error + 'static> {
+    /// No sample could be loaned (e.g. every sample is held by slow subscribers).
+    #[error("cannot loan a sample on {service:?}: {source:?}")]
+    Loan {
+        service: String,
+        #[source]
+        source: iceoryx2::port::LoanError,
+    },
+    /// The loaned payload cannot hold `f32` depth in place.
+    #[error("the shared-memory payload on {service:?} is not aligned for f32")]
+    Misaligned { service: String },
+    /// Filling the sample failed (it is dropped unsent).
+    #[error(transparent)]
+    Fill(E),
+    /// The sample could not be sent.
+    #[error("cannot send on {service:?}: {source:?}")]
+    Send {
+        service: String,
+        #[source]
+        source: iceoryx2::port::SendError,
+    },
+}
 
 /// The daemon's publishing end of one frame service.
 pub struct FramePublisher {
@@ -34,9 +115,9 @@ pub struct FramePublisher {
 
 impl FramePublisher {
     /// Creates the node, cleans up what crashed processes left behind, and opens the services.
-    pub fn new(name: &str, width: u32, height: u32) -> Result<Self, String> {
+    pub fn new(name: &str, width: u32, height: u32) -> Result<Self, PublisherError> {
         // The root every client uses too (DEAR_IOX2_ROOT; the unit sets /run/deard/iceoryx2).
-        let mut config = dear_proto::service::node_config().map_err(|e| e.to_string())?;
+        let mut config = dear_proto::service::node_config()?;
         // The dead-node cleanup that iceoryx2 runs inside `create` reports nothing; turned off
         // there, the explicit one below can say what it removed (it logged `cleanups: 0` after
         // `create` had already removed everything).
@@ -46,27 +127,40 @@ impl FramePublisher {
             .config(&config)
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
-            .map_err(|e| {
-                let root = config.global.root_path();
-                format!("cannot create the iceoryx2 node under {root}: {e:?}")
+            .map_err(|source| PublisherError::Node {
+                root: config.global.root_path().to_string(),
+                source,
             })?;
         log_cleanup(node.try_cleanup_dead_nodes(), "at start");
-        let frames = frame_service(&node, name).map_err(|e| error_chain(&e))?;
-        let events = frame_event_service(&node, name).map_err(|e| error_chain(&e))?;
-        let layout = PayloadLayout::new(width, height)
-            .map_err(|e| format!("cannot publish on {name:?}: {e}"))?;
+        let frames = frame_service(&node, name)?;
+        let events = frame_event_service(&node, name)?;
+        let service = || name.to_string();
+        let layout =
+            PayloadLayout::new(width, height).map_err(|source| PublisherError::Layout {
+                service: service(),
+                source,
+            })?;
         let publisher = frames
             .publisher_builder()
             .initial_max_slice_len(layout.size)
             .create()
-            .map_err(|e| format!("cannot create a publisher on {name:?}: {e:?}"))?;
-        let notifier = events
-            .notifier_builder()
-            .create()
-            .map_err(|e| format!("cannot create a notifier on {name:?}: {e:?}"))?;
+            .map_err(|source| PublisherError::Publisher {
+                service: service(),
+                source,
+            })?;
+        let notifier =
+            events
+                .notifier_builder()
+                .create()
+                .map_err(|source| PublisherError::Notifier {
+                    service: service(),
+                    source,
+                })?;
         refuse_a_second_publisher(&frames, publisher.id(), name)?;
-        let run_id = dear_proto::random_run_id()
-            .map_err(|e| format!("cannot draw a run id for {name:?} (getrandom): {e}"))?;
+        let run_id = dear_proto::random_run_id().map_err(|source| PublisherError::RunId {
+            service: service(),
+            source,
+        })?;
         tracing::info!(run_id = format_args!("{run_id:016x}"), "publisher instance");
         Ok(FramePublisher {
             name: name.to_string(),
@@ -96,25 +190,30 @@ impl FramePublisher {
     /// every sent sample gets the next number, so a gap a client sees is a frame it lost. The
     /// number is spent even if the send then fails (a gap, counted as a loss), because a
     /// failed send may have reached some subscribers and a number must never repeat.
-    pub fn publish(
+    pub fn publish<E: std::error::Error + 'static>(
         &self,
         mut header: FrameHeader,
         arrived: Instant,
-        fill: impl FnOnce(&mut FrameHeader, FrameOutput<'_>) -> Result<(), String>,
-    ) -> Result<FrameHeader, String> {
+        fill: impl FnOnce(&mut FrameHeader, FrameOutput<'_>) -> Result<(), E>,
+    ) -> Result<FrameHeader, PublishError<E>> {
         let layout = self.layout;
         let t_loan = Instant::now();
         // `loan_slice` zero-fills (one memset); the frame itself is never copied afterwards.
-        let mut sample = self
-            .publisher
-            .loan_slice(layout.size)
-            .map_err(|e| format!("cannot loan a sample on {:?}: {e:?}", self.name))?;
+        let mut sample =
+            self.publisher
+                .loan_slice(layout.size)
+                .map_err(|source| PublishError::Loan {
+                    service: self.name.clone(),
+                    source,
+                })?;
         let loan_us = micros(t_loan);
         let payload = sample.payload_mut();
         let (depth_bytes, rest) = payload.split_at_mut(layout.rgb_offset);
         let (rgb_bytes, confidence_bytes) =
             rest.split_at_mut(layout.confidence_offset - layout.rgb_offset);
-        let depth_floats = bytes_as_f32(depth_bytes)?;
+        let depth_floats = bytes_as_f32(depth_bytes).ok_or_else(|| PublishError::Misaligned {
+            service: self.name.clone(),
+        })?;
         let shape = (layout.height, layout.width);
         let output = FrameOutput {
             depth: ArrayViewMut2::from_shape(shape, depth_floats).expect("layout"),
@@ -123,7 +222,7 @@ impl FramePublisher {
             confidence: ArrayViewMut2::from_shape(shape, &mut confidence_bytes[..layout.pixels()])
                 .expect("layout"),
         };
-        fill(&mut header, output)?;
+        fill(&mut header, output).map_err(PublishError::Fill)?;
         // The send itself happens after the header is written, so "publish" covers the loan
         // (and its zero fill); the notify cost shows up in the next frame's idle time.
         header.stage_latency_us[Stage::Publish as usize] = loan_us;
@@ -133,9 +232,10 @@ impl FramePublisher {
         header.sequence = self.sequence.get();
         self.sequence.set(header.sequence + 1);
         *sample.user_header_mut() = header;
-        sample
-            .send()
-            .map_err(|e| format!("cannot send on {:?}: {e:?}", self.name))?;
+        sample.send().map_err(|source| PublishError::Send {
+            service: self.name.clone(),
+            source,
+        })?;
         if let Err(e) = self.notifier.notify() {
             tracing::warn!(error = ?e, "cannot notify listeners");
         }
@@ -175,7 +275,7 @@ fn refuse_a_second_publisher(
     frames: &FrameService,
     own: iceoryx2::identifiers::UniquePublisherId,
     name: &str,
-) -> Result<(), String> {
+) -> Result<(), PublisherError> {
     let mut others = Vec::new();
     frames.dynamic_config().list_publishers(|details| {
         if details.publisher_id != own {
@@ -192,40 +292,24 @@ fn refuse_a_second_publisher(
     if others.is_empty() {
         return Ok(());
     }
-    Err(format!(
-        "another process already publishes on {name:?} (pid {}): one deard per service; stop \
-         it, or give this one another [service] camera / --camera",
-        others.join(", ")
-    ))
-}
-
-/// An error and its sources as one line (`a: b: c`), for this module's `String` errors, so the
-/// iceoryx2 reason under a proto error is not lost.
-fn error_chain(e: &dyn std::error::Error) -> String {
-    let mut text = e.to_string();
-    let mut source = e.source();
-    while let Some(s) = source {
-        text.push_str(": ");
-        text.push_str(&s.to_string());
-        source = s.source();
-    }
-    text
+    Err(PublisherError::SecondPublisher {
+        service: name.to_string(),
+        pids: others.join(", "),
+    })
 }
 
 /// Reinterprets the depth plane as `f32`. The payload starts 8-byte aligned
 /// ([`dear_proto::PAYLOAD_ALIGNMENT`]) and the depth plane at offset 0 with a length of
 /// `4·pixels`, so this cannot fail unless iceoryx2 changed where it puts the payload.
-fn bytes_as_f32(bytes: &mut [u8]) -> Result<&mut [f32], String> {
+fn bytes_as_f32(bytes: &mut [u8]) -> Option<&mut [f32]> {
     if !(bytes.as_ptr() as usize).is_multiple_of(std::mem::align_of::<f32>())
         || !bytes.len().is_multiple_of(4)
     {
-        return Err("the shared-memory payload is not aligned for f32".into());
+        return None;
     }
     // SAFETY: alignment and length checked above; every byte pattern is a valid f32; the
     // returned slice borrows `bytes` mutably, so no aliasing.
-    Ok(
-        unsafe {
-            std::slice::from_raw_parts_mut(bytes.as_mut_ptr().cast::<f32>(), bytes.len() / 4)
-        },
-    )
+    Some(unsafe {
+        std::slice::from_raw_parts_mut(bytes.as_mut_ptr().cast::<f32>(), bytes.len() / 4)
+    })
 }

@@ -12,7 +12,7 @@ use crate::capture::replay::{ReplayOpenError, ReplaySource};
 use crate::capture::{FrameSource, SourceItem};
 use crate::config::{check_calibration_fits, Config, ConfigError, Pacing};
 use crate::processing::{EngineError, Processor};
-use crate::publish::FramePublisher;
+use crate::publish::{FramePublisher, PublisherError};
 use crate::queue::{FrameQueue, Overflow};
 use crate::shared_memory::{self, SharedMemoryError};
 use crate::stats::Stats;
@@ -43,8 +43,8 @@ pub enum RunError {
         source: SharedMemoryError,
     },
     /// The service cannot be opened or published on.
-    #[error("{0}")]
-    Publisher(String),
+    #[error(transparent)]
+    Publisher(#[from] PublisherError),
     /// The processing engine cannot be made.
     #[error(transparent)]
     Engine(#[from] EngineError),
@@ -93,7 +93,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         service: service.clone(),
         source,
     })?;
-    let publisher = FramePublisher::new(&service, width, height).map_err(RunError::Publisher)?;
+    let publisher = FramePublisher::new(&service, width, height)?;
     let mut processor = Processor::from_config(width, height, calibration, &config.pipeline)?;
     let overflow = match config.capture.pacing {
         Pacing::Timestamps => Overflow::DropOldest,
@@ -122,9 +122,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
                 header.frames_skipped = stats.skipped;
                 header.frames_dropped = queue.dropped();
                 match publisher.publish(header, arrived, |h, out| {
-                    processor
-                        .process_into(&frame, h, out)
-                        .map_err(|e| e.to_string())
+                    processor.process_into(&frame, h, out)
                 }) {
                     Ok(sent) => stats.record(&sent),
                     Err(reason) => {

@@ -64,10 +64,22 @@ struct Daemon {
 
 impl Daemon {
     fn start(service: &str, capture: &Path, args: &[&str], log: &Path) -> Daemon {
+        Self::start_with_env(service, capture, args, log, &[])
+    }
+
+    /// [`start`](Self::start) with extra environment variables.
+    fn start_with_env(
+        service: &str,
+        capture: &Path,
+        args: &[&str],
+        log: &Path,
+        env: &[(&str, &Path)],
+    ) -> Daemon {
         let child = Command::new(env!("CARGO_BIN_EXE_deard"))
             .args(["--service", service, "--refine", "none", "--replay"])
             .arg(capture)
             .args(args)
+            .envs(env.iter().copied())
             .env("RUST_LOG", "info")
             .stdout(Stdio::null())
             .stderr(File::create(log).unwrap())
@@ -361,4 +373,51 @@ fn the_daemon_notifies_systemd_and_pings_its_watchdog() {
         assert!(message.contains("WATCHDOG=1"), "{message:?}");
     }
     assert!(child.wait().unwrap().success());
+}
+
+/// What a crashed daemon left in shared memory is removed when the next one starts, and the
+/// log says so (it said `cleanups: 0`: iceoryx2's own cleanup inside node creation had already
+/// removed everything and reported nothing). The daemons use an iceoryx2 root of their own
+/// (`DEAR_IOX2_ROOT`), so no other process on the machine cleans up first.
+#[test]
+fn the_cleanup_after_a_crashed_daemon_is_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    let root = tmp.path().join("iceoryx2");
+    let env = [("DEAR_IOX2_ROOT", root.as_path())];
+    let service = unique_service("cleanup-report");
+    let mut crashed = Daemon::start_with_env(
+        &service,
+        &demo(),
+        &["--loop"],
+        &tmp.path().join("crashed.log"),
+        &env,
+    );
+    crashed.wait_for_log("serving", Duration::from_secs(60));
+    assert!(
+        !crashed
+            .log_text()
+            .contains("removed the shared-memory resources"),
+        "nothing to remove in a fresh root:\n{}",
+        crashed.log_text()
+    );
+    crashed.signal("-KILL");
+    crashed.wait(STOP_WITHIN).expect("killed");
+    let mut next = Daemon::start_with_env(
+        &service,
+        &demo(),
+        &["--loop"],
+        &tmp.path().join("next.log"),
+        &env,
+    );
+    next.wait_for_log("serving", Duration::from_secs(60));
+    let log = next.log_text();
+    assert!(
+        log.lines().any(|l| {
+            l.contains("removed the shared-memory resources of dead processes (at start)")
+                && l.contains("processes=1")
+        }),
+        "{log}"
+    );
+    next.signal("-TERM");
+    assert!(next.wait(STOP_WITHIN).expect("stops").success());
 }

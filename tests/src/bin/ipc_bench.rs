@@ -97,7 +97,7 @@ fn publisher(args: &Args) {
         publisher
             .publish(header, Instant::now(), |_, mut out| {
                 out.depth.fill(i as f32);
-                Ok(())
+                Ok::<_, std::convert::Infallible>(())
             })
             .expect("publish");
         let due = start + Duration::from_millis(args.interval_ms * (i as u64 + 1));
