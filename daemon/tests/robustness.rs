@@ -421,3 +421,32 @@ fn the_cleanup_after_a_crashed_daemon_is_reported() {
     next.signal("-TERM");
     assert!(next.wait(STOP_WITHIN).expect("stops").success());
 }
+
+/// A log that cannot be written (stderr on a full disk: `/dev/full` fails every write with
+/// ENOSPC) does not stop the daemon: it serves the whole replay and exits cleanly. (Before,
+/// tracing reported the failed write with `eprintln!`, which panicked: exit status 101.)
+#[test]
+fn a_full_disk_under_the_log_does_not_stop_the_daemon() {
+    let status = Command::new(env!("CARGO_BIN_EXE_deard"))
+        .args([
+            "--service",
+            &unique_service("full-disk"),
+            "--refine",
+            "none",
+        ])
+        .arg("--replay")
+        .arg(demo())
+        .args([
+            "--pacing",
+            "fast",
+            "--exit-when-done",
+            "--stats-interval",
+            "0.01",
+        ])
+        .env("RUST_LOG", "debug")
+        .stdout(Stdio::null())
+        .stderr(File::create("/dev/full").expect("/dev/full"))
+        .status()
+        .expect("run deard");
+    assert!(status.success(), "{status}");
+}
