@@ -34,7 +34,9 @@ done
 
 # System packages: a C toolchain for -sys crates, pkg-config, and (for train/) Python's venv.
 packages=(build-essential pkg-config)
-$rust_only || packages+=(python3-venv)
+# train/'s venv; strace for the install test (scripts/install_test.sh traces the daemon's system
+# calls against the unit's filter).
+$rust_only || packages+=(python3-venv strace)
 missing=()
 for pkg in "${packages[@]}"; do
     dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")

@@ -16,3 +16,14 @@ if [ -d train ]; then
     .venv/bin/ruff format --check train scripts fixtures
     echo "== pytest"; (cd train && ../.venv/bin/python -m pytest -q tests)
 fi
+
+# The install tier: the README's install recipe and the hardened systemd unit, on this machine
+# (needs root: it adds the deard user and installs into /usr/local and /etc, then removes it
+# all; and release binaries, about 8 minutes to build on 2 cores).
+if [ "$(id -u)" = 0 ]; then
+    echo "== install recipe and unit (scripts/install_test.sh)"
+    cargo build --release --quiet -p deard -p dear-client
+    scripts/install_test.sh
+else
+    echo "== install recipe and unit: skipped (needs root; run sudo scripts/install_test.sh)"
+fi
