@@ -2,6 +2,7 @@
 //! output of a frame, and process handling for `deard` and the probe client.
 
 pub mod bundles;
+pub mod engines;
 pub mod processes;
 pub mod scene;
 

@@ -40,7 +40,7 @@ pub struct Daemon {
 
 impl Daemon {
     /// Starts `deard --service <service> <args...>` with its log in `log`.
-    pub fn start(service: &str, args: &[&str], log: &Path) -> Daemon {
+    pub fn start<S: AsRef<std::ffi::OsStr>>(service: &str, args: &[S], log: &Path) -> Daemon {
         let log_file = File::create(log).expect("daemon log file");
         let child = Command::new(binary("deard"))
             .args(["--service", service, "--stats-interval", "1"])
@@ -203,18 +203,6 @@ impl Probe {
             }
         }
         seen
-    }
-
-    /// Collects `n` frames, failing the test if they do not all come within `timeout` each.
-    /// Only where `n` frames must arrive whatever is lost (e.g. a looping daemon); the frame
-    /// service does not promise every frame to a subscriber (see [`Probe::collect_until`]).
-    pub fn take(&self, n: usize, timeout: Duration) -> Vec<Seen> {
-        (0..n)
-            .map(|i| {
-                self.next(timeout)
-                    .unwrap_or_else(|| panic!("probe got only {i} of {n} frames"))
-            })
-            .collect()
     }
 
     /// Kills the probe with SIGKILL (a client crash).

@@ -8,6 +8,17 @@ use dear_pipeline::capture::{CaptureDir, CaptureManifest, CaptureWriter, Intrins
 use dear_pipeline::{Calibration, RgbdFrame};
 use ndarray::{Array2, Array3};
 
+/// The factory calibration the tests' captures carry: a few pixels off in every term, so
+/// alignment visibly matters.
+pub fn factory_calibration() -> Calibration {
+    Calibration {
+        tx: 4.0,
+        ty: 0.5,
+        cx: 1.5,
+        cy: -1.0,
+    }
+}
+
 /// Writes `frames` frames of `width`×`height` at 30 fps into `dir`, with a factory calibration
 /// of `calibration`.
 pub fn write_capture(

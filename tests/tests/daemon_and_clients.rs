@@ -11,33 +11,16 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
+use dear_e2e_tests::engines::Engine;
 use dear_e2e_tests::processes::{
     lost_by_sequence, split_runs, unique_service, Counts, Daemon, Probe, Seen,
 };
 use dear_e2e_tests::{expected_payload_hashes, scene};
-use dear_pipeline::Calibration;
 use dear_proto::flags;
-use deard::config::{NetworkPlacement, PipelineConfig, RefineMode};
 
 const W: u32 = 160;
 const H: u32 = 120;
 const WAIT: Duration = Duration::from_secs(30);
-
-fn calibration() -> Calibration {
-    Calibration {
-        tx: 4.0,
-        ty: 0.5,
-        cx: 1.5,
-        cy: -1.0,
-    }
-}
-
-fn classical() -> PipelineConfig {
-    PipelineConfig {
-        refine: RefineMode::Classical,
-        ..PipelineConfig::default()
-    }
-}
 
 /// Checks what one probe received from one publisher run (`frames`: one `run_id`) against the
 /// protocol and against what the publisher says it did (`counts`, from its log), and returns
@@ -144,39 +127,26 @@ fn fixture_bundle() -> std::path::PathBuf {
 #[test]
 fn with_a_bundle_the_daemon_publishes_the_dear_chain_output_with_online_calibration() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = scene::write_capture(&tmp.path().join("cap"), 8, W, H, calibration());
+    let capture = scene::write_capture(
+        &tmp.path().join("cap"),
+        8,
+        W,
+        H,
+        scene::factory_calibration(),
+    );
     let bundle = fixture_bundle();
     // The network inline on the frames that ask for it: deterministic, so every payload can
     // be compared with the in-process chain (background delivery depends on timing; the next
     // test covers it).
-    let pipeline = PipelineConfig {
-        refine: RefineMode::Dear,
-        bundle: bundle.clone(),
-        online_interval_frames: 3,
-        online_network: NetworkPlacement::Inline,
-        ..PipelineConfig::default()
-    };
-    let expected = expected_payload_hashes(&capture, &pipeline);
+    let engine = Engine::dear_inline(&bundle);
+    let expected = expected_payload_hashes(&capture, &engine.pipeline);
     assert_eq!(expected.len(), 8);
     let readable: Vec<u64> = expected.keys().copied().collect();
     let service = unique_service("dear-bundle");
     let probe = Probe::start(&service, 1000);
     let mut daemon = Daemon::start(
         &service,
-        &[
-            "--refine",
-            "dear",
-            "--bundle",
-            bundle.to_str().unwrap(),
-            "--online-interval",
-            "3",
-            "--online-network",
-            "inline",
-            "--pacing",
-            "fast",
-            "--replay",
-            capture.root().to_str().unwrap(),
-        ],
+        &engine.replay_fast(capture.root()),
         &tmp.path().join("deard.log"),
     );
     let finished = daemon.wait_source_finished(WAIT);
@@ -219,7 +189,13 @@ fn with_a_bundle_the_daemon_publishes_the_dear_chain_output_with_online_calibrat
 #[test]
 fn with_the_network_in_the_background_no_frame_waits_and_measurements_arrive() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = scene::write_capture(&tmp.path().join("cap"), 30, W, H, calibration());
+    let capture = scene::write_capture(
+        &tmp.path().join("cap"),
+        30,
+        W,
+        H,
+        scene::factory_calibration(),
+    );
     let bundle = fixture_bundle();
     let service = unique_service("dear-background");
     let limit = 900;
@@ -279,8 +255,14 @@ fn with_the_network_in_the_background_no_frame_waits_and_measurements_arrive() {
 #[test]
 fn two_clients_receive_the_frames_in_order_with_the_pipeline_output() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = scene::write_capture(&tmp.path().join("cap"), 12, W, H, calibration());
-    let expected = expected_payload_hashes(&capture, &classical());
+    let capture = scene::write_capture(
+        &tmp.path().join("cap"),
+        12,
+        W,
+        H,
+        scene::factory_calibration(),
+    );
+    let expected = expected_payload_hashes(&capture, &Engine::classical().pipeline);
     assert_eq!(expected.len(), 12);
     let readable: Vec<u64> = expected.keys().copied().collect();
     let service = unique_service("two-clients");
@@ -289,14 +271,7 @@ fn two_clients_receive_the_frames_in_order_with_the_pipeline_output() {
     // Fast pacing: the capture queue blocks, so the publisher must send all 12 frames.
     let mut daemon = Daemon::start(
         &service,
-        &[
-            "--refine",
-            "classical",
-            "--pacing",
-            "fast",
-            "--replay",
-            capture.root().to_str().unwrap(),
-        ],
+        &Engine::classical().replay_fast(capture.root()),
         &tmp.path().join("deard.log"),
     );
     let finished = daemon.wait_source_finished(WAIT);
@@ -340,8 +315,14 @@ fn two_clients_receive_the_frames_in_order_with_the_pipeline_output() {
 #[test]
 fn a_slow_client_loses_only_its_own_oldest_frames_and_counts_them() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = scene::write_capture(&tmp.path().join("cap"), 20, W, H, calibration());
-    let expected = expected_payload_hashes(&capture, &classical());
+    let capture = scene::write_capture(
+        &tmp.path().join("cap"),
+        20,
+        W,
+        H,
+        scene::factory_calibration(),
+    );
+    let expected = expected_payload_hashes(&capture, &Engine::classical().pipeline);
     assert_eq!(expected.len(), 20);
     let readable: Vec<u64> = expected.keys().copied().collect();
     let service = unique_service("slow-client");
@@ -352,14 +333,7 @@ fn a_slow_client_loses_only_its_own_oldest_frames_and_counts_them() {
     let slow = Probe::start_with_delay(&service, 1000, Duration::from_millis(300));
     let mut daemon = Daemon::start(
         &service,
-        &[
-            "--refine",
-            "classical",
-            "--pacing",
-            "fast",
-            "--replay",
-            capture.root().to_str().unwrap(),
-        ],
+        &Engine::classical().replay_fast(capture.root()),
         &tmp.path().join("deard.log"),
     );
     let finished = daemon.wait_source_finished(WAIT);
@@ -388,8 +362,14 @@ fn a_slow_client_loses_only_its_own_oldest_frames_and_counts_them() {
 #[test]
 fn killing_a_client_disturbs_neither_the_daemon_nor_the_other_client() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = scene::write_capture(&tmp.path().join("cap"), 30, W, H, calibration());
-    let expected = expected_payload_hashes(&capture, &classical());
+    let capture = scene::write_capture(
+        &tmp.path().join("cap"),
+        30,
+        W,
+        H,
+        scene::factory_calibration(),
+    );
+    let expected = expected_payload_hashes(&capture, &Engine::classical().pipeline);
     assert_eq!(expected.len(), 30);
     let readable: Vec<u64> = expected.keys().copied().collect();
     let service = unique_service("kill-client");
@@ -445,8 +425,14 @@ fn killing_a_client_disturbs_neither_the_daemon_nor_the_other_client() {
 #[test]
 fn a_restarted_daemon_is_picked_up_by_a_running_client() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = scene::write_capture(&tmp.path().join("cap"), 16, W, H, calibration());
-    let expected = expected_payload_hashes(&capture, &classical());
+    let capture = scene::write_capture(
+        &tmp.path().join("cap"),
+        16,
+        W,
+        H,
+        scene::factory_calibration(),
+    );
+    let expected = expected_payload_hashes(&capture, &Engine::classical().pipeline);
     assert_eq!(expected.len(), 16);
     let readable: Vec<u64> = expected.keys().copied().collect();
     let service = unique_service("restart");
@@ -533,7 +519,13 @@ fn a_restarted_daemon_is_picked_up_by_a_running_client() {
 #[test]
 fn bad_frames_are_skipped_counted_and_named() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = scene::write_capture(&tmp.path().join("cap"), 10, W, H, calibration());
+    let capture = scene::write_capture(
+        &tmp.path().join("cap"),
+        10,
+        W,
+        H,
+        scene::factory_calibration(),
+    );
     // A corrupt PNG, a missing file and a frame of the wrong resolution.
     let corrupt = capture.frame_paths(2).rgb;
     let bytes = std::fs::read(&corrupt).unwrap();
@@ -543,7 +535,7 @@ fn bad_frames_are_skipped_counted_and_named() {
     let wrong_size = capture.frame_paths(7).depth;
     let small = ndarray::Array2::<f32>::from_elem((H as usize / 2, W as usize / 2), 1.0);
     dear_pipeline::capture::png::write_depth(&wrong_size, small.view(), 0.001).unwrap();
-    let expected = expected_payload_hashes(&capture, &classical());
+    let expected = expected_payload_hashes(&capture, &Engine::classical().pipeline);
     let readable: Vec<u64> = expected.keys().copied().collect();
     assert_eq!(readable, vec![0, 1, 3, 4, 6, 8, 9]);
     let bad = [2u64, 5, 7];
@@ -552,14 +544,7 @@ fn bad_frames_are_skipped_counted_and_named() {
     let probe = Probe::start(&service, 1000);
     let mut daemon = Daemon::start(
         &service,
-        &[
-            "--refine",
-            "classical",
-            "--pacing",
-            "fast",
-            "--replay",
-            capture.root().to_str().unwrap(),
-        ],
+        &Engine::classical().replay_fast(capture.root()),
         &tmp.path().join("deard.log"),
     );
     let finished = daemon.wait_source_finished(WAIT);
