@@ -9,15 +9,17 @@
 # 4. The unit's ExecStart runs as the unit would run it: as User=/Group=/SupplementaryGroups=,
 #    with its Environment=, UMask= and WorkingDirectory=, no capabilities, no new privileges,
 #    and the sandbox emulated with namespaces: the root file system read-only but for
-#    /dev/shm and the RuntimeDirectory (ProtectSystem=strict + ReadWritePaths), a private
+#    the RuntimeDirectory (ProtectSystem=strict), no /dev/shm (InaccessiblePaths=), a private
 #    /tmp (PrivateTmp=yes), no home directories (ProtectHome=yes), no network
 #    (PrivateNetwork=yes). It is traced (strace) to check every system call it makes against
 #    the unit's SystemCallFilter= and that it never maps memory writable and executable
 #    (MemoryDenyWriteExecute=yes), and systemd's notify protocol is played by a socket here:
 #    READY=1 and WATCHDOG=1 must arrive.
-# 5. `dear dump`, run outside the sandbox from another directory with the README's client
-#    setting (DEAR_IOX2_ROOT), receives frames; one without it (default root) does not see
-#    the service. As the daemon's user: other users are issue 15.
+# 5. Apps as other users: `dear dump`, run outside the sandbox from another directory with the
+#    README's client setting (DEAR_IOX2_ROOT) as a user in the service's group (added to it
+#    with the README's command), receives frames; a user outside the group is refused with an
+#    error that says why; a client without the setting (default root) does not see the
+#    service; nothing of the daemon's is in /dev/shm.
 # 6. SIGTERM stops the daemon cleanly (exit 0, "stopped" logged, STOPPING=1 sent).
 #
 # Everything installed is removed afterwards, also on failure. Refuses to run where deard is
@@ -57,6 +59,13 @@ for p in "${installed[@]}"; do
     [ ! -e "$p" ] || fail "$p exists: deard looks installed here; not touching it"
 done
 getent passwd deard >/dev/null && fail "user deard exists: deard looks installed here"
+getent group dear >/dev/null && fail "group dear exists: deard looks installed here"
+# Two app users: one the README adds to the group, one it does not.
+app_user=dear-test-app
+other_user=dear-test-other
+for u in "$app_user" "$other_user"; do
+    getent passwd "$u" >/dev/null && fail "user $u exists (a previous run's?): userdel it"
+done
 
 # In /run, not /tmp: the sandboxed daemon has a /tmp of its own and must reach the notify socket.
 scratch=$(mktemp -d /run/deard-install-test.XXXXXX)
@@ -73,9 +82,12 @@ cleanup() {
     fi
     if [ -n "${notify_pid:-}" ]; then kill "$notify_pid" 2>/dev/null || true; fi
     rm -rf "${installed[@]}" /run/deard
-    # The daemon's shared memory (its own prefix, see node_config) and the user.
-    find /dev/shm -maxdepth 1 -user deard -delete 2>/dev/null || true
-    getent passwd deard >/dev/null && userdel deard
+    # The users and the group (anything of theirs in /dev/shm too, should a check fail).
+    find /dev/shm -maxdepth 1 \( -user deard -o -user "$app_user" \) -delete 2>/dev/null || true
+    for u in "$app_user" "$other_user" deard; do
+        getent passwd "$u" >/dev/null && userdel "$u"
+    done
+    getent group dear >/dev/null && groupdel dear
     if [ "$rc" = 0 ]; then
         rm -rf "$scratch"
         echo "install_test: ok"
@@ -166,7 +178,8 @@ sandboxed_run=(
         mount -t tmpfs -o mode=1777 tmpfs /tmp   # PrivateTmp=yes
         mount -t tmpfs -o ro,mode=755 tmpfs /home
         mount -t tmpfs -o ro,mode=700 tmpfs /root # ProtectHome=yes
-        mount -o remount,bind,ro /               # ProtectSystem=strict (/dev/shm is its own mount)
+        mount -t tmpfs -o ro,mode=000 tmpfs /dev/shm # InaccessiblePaths=/dev/shm
+        mount -o remount,bind,ro /               # ProtectSystem=strict
         shift
         umask "$1"; shift
         cd "$1"; shift
@@ -191,49 +204,64 @@ grep -q "root=/run/deard/iceoryx2" "$scratch/deard.log" \
     || fail "deard does not use /run/deard/iceoryx2: $(cat "$scratch/deard.log")"
 
 # --- 5. clients ---------------------------------------------------------------------------
-# An app on the device: outside the sandbox, another working directory, the environment the
-# README gives clients. It runs as the daemon's user: iceoryx2 0.10 creates its files for
-# their owner only, so a client of another user (root included) receives nothing yet, the
-# multi-user deployment of issue 15.
+# Apps on the device: outside the sandbox, another working directory, the environment the
+# README gives clients, as users other than the daemon's.
 client_root=$(sed -n 's/^DEAR_IOX2_ROOT=\([^ ]*\) dear watch.*/\1/p' README.md)
 [ "$client_root" = /run/deard/iceoryx2 ] \
     || fail "README's client example does not set DEAR_IOX2_ROOT=/run/deard/iceoryx2: '$client_root'"
-step "dear dump as $user from /, DEAR_IOX2_ROOT=$client_root"
-install -d -o "$user" "$scratch/user"
-(cd / && env -i PATH=/usr/bin:/bin DEAR_IOX2_ROOT="$client_root" \
-    setpriv --reuid "$user" --regid "$group" --init-groups \
-    /usr/local/bin/dear dump --count 5 --out "$scratch/user/dump" --timeout-s 30 \
-    >"$scratch/dump-user.log" 2>&1) \
-    || fail "$user client got no frames: $(cat "$scratch/dump-user.log" "$scratch/deard.log")"
-n=$(find "$scratch/user/dump/frames" -name '*.depth.png' | wc -l)
-[ "$n" = 5 ] || fail "$user client wrote $n depth frames, not 5"
-echo "$user client: 5 frames"
+# The README's command that lets a user's apps receive frames, for this test's user.
+add_to_group=$(sed -n 's/^sudo usermod -aG dear "\$USER".*/usermod -aG dear/p' README.md)
+[ -n "$add_to_group" ] || fail "README does not say 'sudo usermod -aG dear \"\$USER\"'"
+useradd --no-create-home --shell /usr/sbin/nologin "$app_user"
+useradd --no-create-home --shell /usr/sbin/nologin "$other_user"
+$add_to_group "$app_user"
+install -d -o "$app_user" "$scratch/app"
+install -d -o "$other_user" "$scratch/other"
+as_client() {  # USER DIR ARGS...: a dear command as USER from /, with the clients' setting
+    local who=$1 dir=$2; shift 2
+    (cd / && env -i PATH=/usr/bin:/bin DEAR_IOX2_ROOT="$client_root" \
+        setpriv --reuid "$who" --regid "$who" --init-groups /usr/local/bin/dear "$@" \
+        --out "$dir/dump")
+}
+step "dear dump as $app_user (in group dear) from /, DEAR_IOX2_ROOT=$client_root"
+as_client "$app_user" "$scratch/app" dump --count 5 --timeout-s 30 >"$scratch/dump-app.log" 2>&1 \
+    || fail "$app_user got no frames: $(cat "$scratch/dump-app.log" "$scratch/deard.log")"
+n=$(find "$scratch/app/dump/frames" -name '*.depth.png' | wc -l)
+[ "$n" = 5 ] || fail "$app_user wrote $n depth frames, not 5"
+echo "$app_user: 5 frames"
 
-# The service is not in the default root: a client there does not see it. `dear list` run
-# as deard with a private /tmp, so it neither sees nor touches the host's /tmp/iceoryx2.
+step "dear dump as $other_user (not in the group): refused, and says why"
+rc=0
+as_client "$other_user" "$scratch/other" dump --count 1 --timeout-s 5 >"$scratch/dump-other.log" 2>&1 || rc=$?
+[ "$rc" != 0 ] || fail "$other_user, outside the group, received frames: $(cat "$scratch/dump-other.log")"
+grep -q "Permission denied" "$scratch/dump-other.log" && grep -q "$client_root" "$scratch/dump-other.log" \
+    || fail "$other_user's error does not name the root and the permission: $(cat "$scratch/dump-other.log")"
+echo "$other_user: $(tail -1 "$scratch/dump-other.log")"
+
+# The service is not in the default root: a client there does not see it. `dear list` with a
+# private /dev/shm, so it neither sees nor touches the host's /dev/shm/dear.
 listing=$(unshare --mount --propagation private sh -c \
-    'mount -t tmpfs tmpfs /tmp && exec "$@"' list \
-    env -i PATH=/usr/bin:/bin setpriv --reuid "$user" --regid "$group" --init-groups \
+    'mount -t tmpfs tmpfs /dev/shm && exec "$@"' list \
+    env -i PATH=/usr/bin:/bin setpriv --reuid "$app_user" --regid "$app_user" --init-groups \
     /usr/local/bin/dear list 2>&1) || fail "dear list (default root) failed: $listing"
 grep -q "no DEAR frame services found" <<<"$listing" \
-    || fail "a service is visible under the default root /tmp/iceoryx2: $listing"
+    || fail "a service is visible under the default root /dev/shm/dear: $listing"
 listing=$(env -i PATH=/usr/bin:/bin DEAR_IOX2_ROOT="$client_root" \
-    setpriv --reuid "$user" --regid "$group" --init-groups /usr/local/bin/dear list 2>&1) \
+    setpriv --reuid "$app_user" --regid "$app_user" --init-groups /usr/local/bin/dear list 2>&1) \
     || fail "dear list under $client_root failed: $listing"
 grep -q "^ *dear/cam0/frames " <<<"$listing" || fail "dear list does not show the service: $listing"
 echo "$listing"
 echo "dear list: the service under $client_root only"
 
-# What the daemon created in /dev/shm: none of it writable by others.
-shm_files=$(find /dev/shm -maxdepth 1 -user "$user" -printf '%m %f\n')
-[ -n "$shm_files" ] || fail "no shared memory of $user in /dev/shm"
-# Except iceoryx2's node-id counter (*.global_mgmt), which iceoryx2 0.10 creates writable by
-# everyone on purpose (enable_global_access); README says what that leaves open.
-writable=$(awk '$1 ~ /[2367]$/ && $2 !~ /\.global_mgmt$/' <<<"$shm_files")
-[ -z "$writable" ] || fail "shared memory writable by other users: $writable"
-grep -Eq '^[0-7]*[2367] dear_ca47c86f_.*global_mgmt$' <<<"$shm_files" \
-    || echo "note: the global_mgmt segment is no longer world-writable; update README"
-echo "shared memory: $(wc -l <<<"$shm_files") files of $user, modes $(cut -d' ' -f1 <<<"$shm_files" | sort -u | paste -sd ' ')"
+# Where the transport's files are: all under the root, none in /dev/shm; the root reachable by
+# the group only.
+shm_files=$(find /dev/shm -maxdepth 1 \( -user "$user" -o -user "$app_user" \) -printf '%f\n')
+[ -z "$shm_files" ] || fail "files of $user or $app_user in /dev/shm: $shm_files"
+root_mode=$(stat -c '%a %U %G' "$client_root")
+[ "$root_mode" = "770 $user $group" ] || fail "$client_root is '$root_mode', not '770 $user $group'"
+runtime_stat=$(stat -c '%a %U %G' "$runtime_dir")
+[ "$runtime_stat" = "750 $user $group" ] || fail "$runtime_dir is '$runtime_stat', not '750 $user $group'"
+echo "transport: $(find "$client_root" -type f | wc -l) files under $client_root ($root_mode), none in /dev/shm"
 
 # The frame loop pings at half the period (1 s here): a second ping shows it is periodic.
 for _ in $(seq 50); do

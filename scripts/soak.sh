@@ -145,11 +145,12 @@ counters() {
     sed 's/\x1b\[[0-9;]*m//g' "$daemon_log" | grep -o 'published=[0-9]* skipped=[0-9]* dropped=[0-9]*' |
         tail -n 1 | sed 's/[a-z]*=//g; s/ /,/g' | grep . || echo 0,0,0
 }
-# Shared memory the daemon has mapped: /dev/shm files named in its memory map, allocated and
-# apparent kB, and how many.
+# Shared memory the daemon has mapped: the transport's files (under its root directory, see
+# dear_proto::transport) named in its memory map, allocated and apparent kB, and how many.
+transport_root=${DEAR_IOX2_ROOT:-/dev/shm/dear}
 shm_usage() {
     local files
-    files=$(awk '$6 ~ /^\/dev\/shm\// {print $6}' "/proc/$1/maps" 2>/dev/null | sort -u)
+    files=$(awk -v root="${transport_root%/}/" 'index($6, root) == 1 {print $6}' "/proc/$1/maps" 2>/dev/null | sort -u)
     if [ -z "$files" ]; then
         echo 0,0,0
         return

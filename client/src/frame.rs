@@ -1,13 +1,13 @@
 //! A received frame: typed, zero-copy views of the shared-memory sample.
 
+use dear_proto::Transport;
 use dear_proto::{FrameHeader, HeaderError, PayloadLayout};
-use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
 use ndarray::{ArrayView2, ArrayView3};
 
 /// One published frame, borrowed from shared memory until dropped.
 pub struct Frame {
-    sample: Sample<ipc::Service, [u8], FrameHeader>,
+    sample: Sample<Transport, [u8], FrameHeader>,
     layout: PayloadLayout,
 }
 
@@ -34,7 +34,7 @@ pub enum FrameError {
 
 impl Frame {
     /// Wraps a sample after checking its header against its payload.
-    pub(crate) fn new(sample: Sample<ipc::Service, [u8], FrameHeader>) -> Result<Self, FrameError> {
+    pub(crate) fn new(sample: Sample<Transport, [u8], FrameHeader>) -> Result<Self, FrameError> {
         let layout = sample.user_header().validate(sample.payload().len())?;
         let address = sample.payload().as_ptr() as usize;
         if !address.is_multiple_of(std::mem::align_of::<f32>()) {

@@ -2,7 +2,9 @@
 
 use std::time::{Duration, Instant};
 
-use dear_proto::service::{frame_event_service, frame_service, node_config, NodeConfigError};
+use dear_proto::service::{frame_event_service, frame_service};
+use dear_proto::transport::{create_root, node_config, NodeConfigError, RootError};
+use dear_proto::Transport;
 use dear_proto::{EventServiceError, FrameHeader, FrameServiceError};
 use iceoryx2::node::NodeCreationFailure;
 use iceoryx2::port::listener::{Listener, ListenerCreateError, ListenerWaitError};
@@ -30,6 +32,14 @@ pub enum ConnectError {
         service: String,
         #[source]
         source: NodeConfigError,
+    },
+    /// The root directory is missing and cannot be made: typically a user outside the
+    /// service's group (it cannot enter `/run/deard`).
+    #[error("cannot connect to {service:?}")]
+    RootDirectory {
+        service: String,
+        #[source]
+        source: RootError,
     },
     /// A bad service name, or the service exists with another contract (QoS, header type).
     #[error("cannot connect to {service:?}")]
@@ -97,9 +107,9 @@ pub enum ClientError {
 /// A subscription to one `deard` frame service.
 pub struct Client {
     service: String,
-    node: Node<ipc::Service>,
-    subscriber: Subscriber<ipc::Service, [u8], FrameHeader>,
-    listener: Listener<ipc::Service>,
+    node: Node<Transport>,
+    subscriber: Subscriber<Transport, [u8], FrameHeader>,
+    listener: Listener<Transport>,
 }
 
 impl Client {
@@ -107,8 +117,12 @@ impl Client {
     /// running yet; frames arrive once it publishes.
     pub fn connect(service: &str) -> Result<Self, ConnectError> {
         let name = || service.to_string();
-        // The daemon's iceoryx2 root: $DEAR_IOX2_ROOT, else /tmp/iceoryx2 (node_config).
+        // The daemon's iceoryx2 root: $DEAR_IOX2_ROOT, else /dev/shm/dear (node_config).
         let config = node_config().map_err(|source| ConnectError::Root {
+            service: name(),
+            source,
+        })?;
+        create_root(&config).map_err(|source| ConnectError::RootDirectory {
             service: name(),
             source,
         })?;
@@ -116,7 +130,7 @@ impl Client {
             .config(&config)
             // The application owns its signals; iceoryx2 must not install handlers of its own.
             .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
+            .create::<Transport>()
             .map_err(|source| ConnectError::Node {
                 service: name(),
                 root: config.global.root_path().to_string(),

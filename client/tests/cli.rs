@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 
 use dear_pipeline::capture::CaptureDir;
 use dear_proto::service::{frame_event_service, frame_service, FrameEventService, FrameService};
+use dear_proto::Transport;
 use dear_proto::{flags, random_run_id, FrameHeader, PayloadLayout, Stage};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -53,8 +54,8 @@ fn expected_confidence(k: u64, r: usize, c: usize) -> u8 {
 
 /// One publisher and notifier on a fresh frame service, like deard's.
 struct TestPublisher {
-    publisher: Publisher<ipc::Service, [u8], FrameHeader>,
-    notifier: Notifier<ipc::Service>,
+    publisher: Publisher<Transport, [u8], FrameHeader>,
+    notifier: Notifier<Transport>,
     layout: PayloadLayout,
     /// Drawn per instance, as deard does.
     run_id: u64,
@@ -62,14 +63,18 @@ struct TestPublisher {
     sent: u64,
     _frames: FrameService,
     _events: FrameEventService,
-    _node: Node<ipc::Service>,
+    _node: Node<Transport>,
 }
 
 impl TestPublisher {
     fn new(service: &str) -> Self {
+        // The root `dear` uses too ($DEAR_IOX2_ROOT, else /dev/shm/dear).
+        let config = dear_proto::node_config().unwrap();
+        dear_proto::transport::create_root(&config).unwrap();
         let node = NodeBuilder::new()
+            .config(&config)
             .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
+            .create::<Transport>()
             .unwrap();
         let frames = frame_service(&node, service).unwrap();
         let events = frame_event_service(&node, service).unwrap();

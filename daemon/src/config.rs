@@ -71,7 +71,8 @@ pub struct ServiceConfig {
     pub name: Option<String>,
     /// Largest shared memory the frame service may take, MB (1..=[`MAX_SHARED_MEMORY_MB`]):
     /// the publisher's data segment holds `dear_proto::samples_in_shared_memory()` frames. A
-    /// stream that needs more, or more than `/dev/shm` has free, is refused at start.
+    /// stream that needs more, or more than the transport's root directory has free, is refused
+    /// at start.
     pub max_shared_memory_mb: u64,
 }
 

@@ -7,9 +7,10 @@ use std::time::Instant;
 
 use dear_proto::service::{
     frame_event_service, frame_service, EventServiceError, FrameEventService, FrameService,
-    FrameServiceError, NodeConfigError,
+    FrameServiceError,
 };
-use dear_proto::{FrameHeader, LayoutError, PayloadLayout, Stage};
+use dear_proto::{FrameHeader, LayoutError, PayloadLayout, Stage, Transport};
+use iceoryx2::config::Config;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
@@ -20,9 +21,6 @@ use crate::processing::{micros, FrameOutput};
 /// Why the publishing end of a frame service cannot be made.
 #[derive(Debug, thiserror::Error)]
 pub enum PublisherError {
-    /// `DEAR_IOX2_ROOT` is not a usable root.
-    #[error(transparent)]
-    NodeConfig(#[from] NodeConfigError),
     /// iceoryx2 cannot create the node (e.g. its root directory is not writable).
     #[error("cannot create the iceoryx2 node under {root}: {source:?}")]
     Node {
@@ -98,9 +96,9 @@ pub enum PublishError<E: std::error::Error + 'static> {
 /// The daemon's publishing end of one frame service.
 pub struct FramePublisher {
     name: String,
-    node: Node<ipc::Service>,
-    publisher: Publisher<ipc::Service, [u8], FrameHeader>,
-    notifier: Notifier<ipc::Service>,
+    node: Node<Transport>,
+    publisher: Publisher<Transport, [u8], FrameHeader>,
+    notifier: Notifier<Transport>,
     layout: PayloadLayout,
     /// This instance's [`FrameHeader::run_id`], drawn once in `new`.
     run_id: u64,
@@ -115,9 +113,15 @@ pub struct FramePublisher {
 
 impl FramePublisher {
     /// Creates the node, cleans up what crashed processes left behind, and opens the services.
-    pub fn new(name: &str, width: u32, height: u32) -> Result<Self, PublisherError> {
-        // The root every client uses too (DEAR_IOX2_ROOT; the unit sets /run/deard/iceoryx2).
-        let mut config = dear_proto::service::node_config()?;
+    /// `config` is the transport's ([`dear_proto::node_config`]: the root every client uses
+    /// too), its root directory prepared ([`dear_proto::transport::prepare_root`]).
+    pub fn new(
+        config: &Config,
+        name: &str,
+        width: u32,
+        height: u32,
+    ) -> Result<Self, PublisherError> {
+        let mut config = config.clone();
         // The dead-node cleanup that iceoryx2 runs inside `create` reports nothing; turned off
         // there, the explicit one below can say what it removed (it logged `cleanups: 0` after
         // `create` had already removed everything).
@@ -126,7 +130,7 @@ impl FramePublisher {
         let node = NodeBuilder::new()
             .config(&config)
             .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
+            .create::<Transport>()
             .map_err(|source| PublisherError::Node {
                 root: config.global.root_path().to_string(),
                 source,
@@ -282,7 +286,7 @@ fn refuse_a_second_publisher(
             others.push(
                 details
                     .node_id
-                    .pid::<ipc::Service>()
+                    .pid::<Transport>()
                     .map(|pid| pid.value().to_string())
                     .unwrap_or_else(|_| "unknown".into()),
             );

@@ -42,6 +42,12 @@ pub enum RunError {
         #[source]
         source: SharedMemoryError,
     },
+    /// `DEAR_IOX2_ROOT` is not a usable root.
+    #[error(transparent)]
+    Root(#[from] dear_proto::transport::NodeConfigError),
+    /// The root directory cannot be made or is not this user's.
+    #[error(transparent)]
+    RootDirectory(#[from] dear_proto::transport::RootError),
     /// The service cannot be opened or published on.
     #[error(transparent)]
     Publisher(#[from] PublisherError),
@@ -83,17 +89,17 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
     let service = config.service.service_name();
     tracing::info!(source = %source.describe(), %service, width, height, ?calibration, bundle = ?config.pipeline.bundle, refine = ?config.pipeline.refine, "starting");
 
-    shared_memory::check_fits(
-        width,
-        height,
-        config.service.max_shared_memory_mb,
-        std::path::Path::new(shared_memory::SHM_DIR),
-    )
-    .map_err(|source| RunError::SharedMemory {
-        service: service.clone(),
-        source,
-    })?;
-    let publisher = FramePublisher::new(&service, width, height)?;
+    // The transport's files (frames included) live in its root directory: made (or checked
+    // to be this user's) before anything else, so the free-space check reads its file system.
+    let transport = dear_proto::node_config()?;
+    let root = dear_proto::transport::prepare_root(&transport)?;
+    shared_memory::check_fits(width, height, config.service.max_shared_memory_mb, &root).map_err(
+        |source| RunError::SharedMemory {
+            service: service.clone(),
+            source,
+        },
+    )?;
+    let publisher = FramePublisher::new(&transport, &service, width, height)?;
     let mut processor = Processor::from_config(width, height, calibration, &config.pipeline)?;
     let overflow = match config.capture.pacing {
         Pacing::Timestamps => Overflow::DropOldest,

@@ -1,14 +1,12 @@
 //! How much shared memory a stream needs, checked before any is taken: the daemon's own limit
-//! (`[service] max_shared_memory_mb`) and what `/dev/shm` has free. iceoryx2 creates the data
-//! segment sparse, so without this check an oversized stream starts, then dies (SIGBUS) or
-//! fills the machine's tmpfs the first time the frames are written.
+//! (`[service] max_shared_memory_mb`) and what the transport's root directory (a tmpfs:
+//! `/dev/shm/dear`, `/run/deard/iceoryx2`) has free. iceoryx2 creates the data segment
+//! sparse, so without this check an oversized stream starts, then dies (SIGBUS) or fills the
+//! machine's tmpfs the first time the frames are written.
 
 use std::path::Path;
 
 use dear_proto::{samples_in_shared_memory, LayoutError, PayloadLayout};
-
-/// Where iceoryx2 puts its shared memory on Linux (POSIX `shm_open`).
-pub const SHM_DIR: &str = "/dev/shm";
 
 const MB: f64 = 1e6;
 
@@ -131,7 +129,7 @@ mod tests {
 
     #[test]
     fn the_limit_and_the_free_space_bound_the_stream() {
-        let shm = Path::new(SHM_DIR);
+        let shm = Path::new("/dev/shm");
         check_fits(320, 240, 1024, shm).unwrap();
         let e = check_fits(320, 240, 10, shm).unwrap_err().to_string();
         assert!(

@@ -16,6 +16,7 @@
 pub mod header;
 pub mod service;
 pub mod time;
+pub mod transport;
 
 pub use header::{
     flags, random_run_id, FrameHeader, HeaderError, LayoutError, PayloadLayout, Stage,
@@ -26,3 +27,4 @@ pub use service::{
     validate_service_name, EventServiceError, FrameEventService, FrameService, FrameServiceError,
     ServiceNameError, DEFAULT_CAMERA,
 };
+pub use transport::{node_config, Transport, IOX2_ROOT_ENV};

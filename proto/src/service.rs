@@ -15,6 +15,7 @@ use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateE
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use crate::header::FrameHeader;
+use crate::transport::Transport;
 
 /// Frames queued per subscriber before the oldest is overwritten.
 pub const QOS_SUBSCRIBER_BUFFER: usize = 2;
@@ -125,13 +126,13 @@ fn service_name(name: &str) -> Result<ServiceName, ServiceNameError> {
 }
 
 /// The publish-subscribe port factory of the frame service.
-pub type FrameService = publish_subscribe::PortFactory<ipc::Service, [u8], FrameHeader>;
+pub type FrameService = publish_subscribe::PortFactory<Transport, [u8], FrameHeader>;
 /// The event port factory that announces new frames.
-pub type FrameEventService = event::PortFactory<ipc::Service>;
+pub type FrameEventService = event::PortFactory<Transport>;
 
 /// Opens (or creates) the frame service `name` with the protocol's QoS.
 pub fn frame_service(
-    node: &Node<ipc::Service>,
+    node: &Node<Transport>,
     name: &str,
 ) -> Result<FrameService, FrameServiceError> {
     let service_name = service_name(name)?;
@@ -154,7 +155,7 @@ pub fn frame_service(
 
 /// Opens (or creates) the event service that announces each new frame of `name`.
 pub fn frame_event_service(
-    node: &Node<ipc::Service>,
+    node: &Node<Transport>,
     name: &str,
 ) -> Result<FrameEventService, EventServiceError> {
     let service_name = service_name(name)?;
@@ -168,156 +169,4 @@ pub fn frame_event_service(
             name: name.to_string(),
             source,
         })
-}
-
-/// Environment variable naming the directory iceoryx2 keeps its bookkeeping in (node and
-/// service records, event sockets) for the daemon and every client: see [`node_config`].
-pub const IOX2_ROOT_ENV: &str = "DEAR_IOX2_ROOT";
-
-/// The root the systemd unit gives the daemon (`DEAR_IOX2_ROOT`): under `/run/deard`, its
-/// `RuntimeDirectory=` (owned by the service's user, in root-owned `/run`, so no other user can
-/// create or replace it first). Its clients set the same.
-pub const SERVICE_IOX2_ROOT: &str = "/run/deard/iceoryx2";
-
-/// Why [`node_config`] refused the configured iceoryx2 root.
-#[derive(Debug, thiserror::Error)]
-pub enum NodeConfigError {
-    #[error("{IOX2_ROOT_ENV}={value:?} must be an absolute path")]
-    NotAbsolute { value: String },
-    #[error(
-        "{IOX2_ROOT_ENV}={value:?} is not a path iceoryx2 accepts (at most 255 bytes, no NUL)"
-    )]
-    Path {
-        value: String,
-        #[source]
-        source: SemanticStringError,
-    },
-}
-
-/// The iceoryx2 configuration every DEAR node is created with: the daemon's, the SDK's and the
-/// CLI's. All of them must agree on the root directory, or a client looks for the service where
-/// the daemon never wrote it and waits forever.
-///
-/// The root is `$DEAR_IOX2_ROOT` when set and not empty, otherwise iceoryx2's own
-/// configuration, unchanged (`/tmp/iceoryx2` unless an iceoryx2 config file says otherwise).
-/// The systemd unit sets [`SERVICE_IOX2_ROOT`] for the daemon; its clients set the same.
-///
-/// Why a variable and not "use `/run/deard/iceoryx2` when it exists": with that rule every
-/// DEAR process on a machine where the service has run since boot would join the service's
-/// root — the tests and a daemon started by hand too, which then fail unprivileged (they
-/// cannot write there) or, as root, mix with the installed service (tried: a concurrent test
-/// run's daemons moved into the installed service's root). An explicit setting keeps the
-/// default world (`/tmp/iceoryx2`, no root needed: demo, tests) and the service's apart.
-///
-/// Shared memory itself stays in `/dev/shm` (iceoryx2's POSIX shared memory), which every
-/// process shares. Its names start with iceoryx2's `prefix` and are derived from the service
-/// name, not the root: a daemon under another root with the default prefix would open the
-/// same segments as one under `/tmp/iceoryx2`. So a root other than iceoryx2's default gets a
-/// prefix of its own, `dear_<hash of the root>_`, that every party computes the same way.
-///
-/// iceoryx2's dead-node cleanup on node creation is left as configured; the daemon turns it
-/// off itself to report what it cleans.
-pub fn node_config() -> Result<Config, NodeConfigError> {
-    let from_env = std::env::var_os(IOX2_ROOT_ENV).filter(|v| !v.is_empty());
-    node_config_from(Config::global_config(), from_env.as_deref())
-}
-
-/// [`node_config`] with its inputs given: the base configuration and the environment
-/// variable's value.
-pub fn node_config_from(
-    base: &Config,
-    from_env: Option<&std::ffi::OsStr>,
-) -> Result<Config, NodeConfigError> {
-    let mut config = base.clone();
-    let Some(value) = from_env else {
-        return Ok(config);
-    };
-    let root = value.to_string_lossy().into_owned();
-    if !root.starts_with('/') {
-        return Err(NodeConfigError::NotAbsolute { value: root });
-    }
-    // iceoryx2 joins entries to the root itself; one trailing slash, as in its default.
-    let normalised = format!("{}/", root.trim_end_matches('/'));
-    let path = Path::new(normalised.as_bytes()).map_err(|source| NodeConfigError::Path {
-        value: root.clone(),
-        source,
-    })?;
-    if path != *Config::default().global.root_path() {
-        config.global.set_root_path(&path);
-        config.global.prefix = root_prefix(&normalised);
-    }
-    Ok(config)
-}
-
-/// `dear_<FNV-1a 32 of the root, 8 hex digits>_`: a shared-memory name prefix per root.
-fn root_prefix(root: &str) -> FileName {
-    let hash = root.bytes().fold(0x811c_9dc5_u32, |h, b| {
-        (h ^ u32::from(b)).wrapping_mul(0x0100_0193)
-    });
-    FileName::new(format!("dear_{hash:08x}_").as_bytes())
-        .expect("letters, digits and _ make a valid file name")
-}
-
-#[cfg(test)]
-mod node_config_tests {
-    use super::*;
-    use std::ffi::OsStr;
-
-    fn with_root(root: &str) -> Result<Config, NodeConfigError> {
-        node_config_from(&Config::default(), Some(OsStr::new(root)))
-    }
-
-    #[test]
-    fn no_variable_keeps_iceoryx2s_default() {
-        let base = Config::default();
-        let config = node_config_from(&base, None).unwrap();
-        assert_eq!(config, base);
-        assert_eq!(config.global.root_path().to_string(), "/tmp/iceoryx2/");
-    }
-
-    #[test]
-    fn the_service_root_gets_its_own_prefix() {
-        let config = with_root(SERVICE_IOX2_ROOT).unwrap();
-        assert_eq!(
-            config.global.root_path().to_string(),
-            "/run/deard/iceoryx2/"
-        );
-        // Fixed by the root alone: the README and the install test name it.
-        assert_eq!(config.global.prefix.to_string(), "dear_ca47c86f_");
-    }
-
-    #[test]
-    fn daemon_and_client_agree_however_the_root_is_spelled() {
-        let a = with_root("/srv/x//").unwrap();
-        let b = with_root("/srv/x").unwrap();
-        assert_eq!(a.global.root_path().to_string(), "/srv/x/");
-        assert_eq!(a.global.prefix, b.global.prefix);
-        assert_eq!(a.global.root_path(), b.global.root_path());
-    }
-
-    #[test]
-    fn different_roots_never_share_shared_memory_names() {
-        let p = |root: &str| with_root(root).unwrap().global.prefix;
-        assert_ne!(p("/run/deard/iceoryx2"), p("/run/other/iceoryx2"));
-        assert_ne!(p("/run/deard/iceoryx2"), Config::default().global.prefix);
-        // Naming the default root explicitly is the default: same prefix as everyone else's.
-        assert_eq!(p("/tmp/iceoryx2"), Config::default().global.prefix);
-    }
-
-    #[test]
-    fn a_relative_or_overlong_root_is_refused_by_name() {
-        let e = with_root("run/x").unwrap_err();
-        assert!(matches!(e, NodeConfigError::NotAbsolute { .. }), "{e}");
-        assert!(e.to_string().contains("DEAR_IOX2_ROOT=\"run/x\""), "{e}");
-        let e = with_root(&format!("/{}", "a".repeat(300))).unwrap_err();
-        assert!(matches!(e, NodeConfigError::Path { .. }), "{e}");
-    }
-
-    #[test]
-    fn the_base_configuration_is_kept() {
-        let mut base = Config::default();
-        base.global.node.cleanup_dead_nodes_on_creation = false;
-        let config = node_config_from(&base, Some(OsStr::new("/run/x"))).unwrap();
-        assert!(!config.global.node.cleanup_dead_nodes_on_creation);
-    }
 }

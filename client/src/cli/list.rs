@@ -6,6 +6,7 @@
 
 use anyhow::Context;
 use dear_proto::FrameHeader;
+use dear_proto::Transport;
 use iceoryx2::prelude::*;
 use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as Pattern;
 
@@ -28,9 +29,13 @@ pub struct FrameServiceInfo {
 /// process as one more node (not as a publisher or subscriber) for the moment it looks.
 pub fn frame_services() -> anyhow::Result<Vec<FrameServiceInfo>> {
     let mut found = Vec::new();
-    // The daemon's iceoryx2 root: $DEAR_IOX2_ROOT, else /tmp/iceoryx2 (node_config).
-    let config = dear_proto::service::node_config()?;
-    ipc::Service::list(&config, |details| {
+    // The daemon's iceoryx2 root: $DEAR_IOX2_ROOT, else /dev/shm/dear (node_config).
+    let config = dear_proto::node_config()?;
+    // No root directory: no daemon (or client) has run under it since boot.
+    if !dear_proto::transport::root_dir(&config).exists() {
+        return Ok(found);
+    }
+    Transport::list(&config, |details| {
         if let Pattern::PublishSubscribe(pubsub) = details.static_details.messaging_pattern() {
             let header = pubsub.message_type_details().user_header.type_name();
             if *header == FRAME_HEADER_TYPE_NAME {
@@ -62,7 +67,7 @@ pub fn frame_services() -> anyhow::Result<Vec<FrameServiceInfo>> {
     let node = NodeBuilder::new()
         .config(&config)
         .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
+        .create::<Transport>()
         .map_err(|e| anyhow::anyhow!("cannot create an iceoryx2 node: {e:?}"))?;
     for info in &mut found {
         if let Some((publishers, subscribers)) = count_ports(&node, &info.name) {
@@ -76,7 +81,7 @@ pub fn frame_services() -> anyhow::Result<Vec<FrameServiceInfo>> {
 
 /// Opens (never creates) the service with the frame types only, so any QoS it was created
 /// with is accepted, and reads its port counts. `None` if it vanished or cannot be opened.
-fn count_ports(node: &Node<ipc::Service>, name: &str) -> Option<(usize, usize)> {
+fn count_ports(node: &Node<Transport>, name: &str) -> Option<(usize, usize)> {
     let service_name: ServiceName = name.try_into().ok()?;
     let service = node
         .service_builder(&service_name)

@@ -88,7 +88,10 @@ fn publisher(args: &Args) {
         r.read_line(&mut line).expect("subscriber ready");
         assert_eq!(line.trim(), "ready");
     }
-    let publisher = FramePublisher::new(&service, args.width, args.height).expect("publisher");
+    let transport = dear_proto::node_config().expect("DEAR_IOX2_ROOT");
+    dear_proto::transport::prepare_root(&transport).expect("the transport's root directory");
+    let publisher =
+        FramePublisher::new(&transport, &service, args.width, args.height).expect("publisher");
     // Let the subscribers' connections settle before timing.
     std::thread::sleep(Duration::from_millis(200));
     let start = Instant::now();

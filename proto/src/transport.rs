@@ -1,0 +1,318 @@
+//! The iceoryx2 service type every DEAR process uses, and where its files live.
+//!
+//! # Why not iceoryx2's `ipc::Service`
+//!
+//! iceoryx2 0.10 gives every resource fixed permissions: by default owner-only (`0600`), so a
+//! daemon running as `deard` and an app running as another user cannot connect at all (the app
+//! fails to create its half of the connection, or receives nothing); with its `dev_permissions`
+//! feature everything is `0666`/`0777`. Its POSIX shared memory always lives in `/dev/shm`, a
+//! directory every local user can list and open, so `dev_permissions` there would let any user
+//! write into the frames and the queues' bookkeeping.
+//!
+//! [`Transport`] is iceoryx2's IPC service with every resource a **file under one root
+//! directory** ([`node_config`]): the data segment, the connections, the dynamic service and
+//! node records, the event sockets, the liveness locks (iceoryx2-cal's `file` back ends, which
+//! map the files shared exactly as `shm_open` does). iceoryx2 is built with `dev_permissions`,
+//! so the files themselves are open to all, and **the root directory's own mode decides who
+//! may connect**: the systemd unit gives the daemon `/run/deard` (mode `0750`, group `dear`);
+//! its `iceoryx2` subdirectory is where the files go. Users in the group receive frames; users
+//! outside it cannot even see the service. On tmpfs (`/run`, `/dev/shm`) the files are memory,
+//! as POSIX shared memory is.
+//!
+//! The cost: a client must use this type too. iceoryx2's stock `ipc::Service` (and its C, C++
+//! and Python bindings, which offer only that one) looks for the service in `/dev/shm` and does
+//! not find it.
+
+use core::fmt::Debug;
+
+use iceoryx2::config::Config;
+use iceoryx2::prelude::*;
+use iceoryx2_bb_elementary_traits::testing::abandonable::Abandonable;
+use iceoryx2_bb_elementary_traits::zero_copy_send::ZeroCopySend;
+use iceoryx2_bb_lock_free::mpmc::counting_bit_set::RelocatableCountingBitSet;
+use iceoryx2_cal::event::trigger::unix_datagram_socket::GenericUnixDatagramSocketTrigger;
+use iceoryx2_cal::event::trigger::State;
+use iceoryx2_cal::shm_allocator::bump_allocator::BumpAllocator;
+use iceoryx2_cal::shm_allocator::pool_allocator::PoolAllocator;
+use iceoryx2_cal::{
+    arc_sync_policy, bag, dynamic_storage, hash, monitoring, reactor, resizable_shared_memory,
+    serialize, shared_memory, static_storage, zero_copy_connection,
+};
+
+/// The iceoryx2 service type of DEAR: iceoryx2's IPC service with file-backed shared memory
+/// under the root directory (module documentation). Daemon and clients must both use it.
+#[derive(Debug, Clone)]
+pub struct Transport {}
+
+type FileMemory<Allocator> = shared_memory::file::Memory<Allocator>;
+
+impl iceoryx2::service::Service for Transport {
+    type StaticStorage = static_storage::file::Storage;
+    type ConfigSerializer = serialize::recommended::Recommended;
+    type PersistentDynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
+        dynamic_storage::file::Storage<T>;
+    type Bag = bag::recommended::Recommended;
+    type DynamicStorage<T: Debug + Send + Sync + ZeroCopySend + 'static> =
+        dynamic_storage::file::Storage<T>;
+    type ServiceNameHasher = hash::recommended::Recommended;
+    type SharedMemory = FileMemory<PoolAllocator>;
+    type ResizableSharedMemory =
+        resizable_shared_memory::dynamic::DynamicMemory<PoolAllocator, FileMemory<PoolAllocator>>;
+    type Connection = zero_copy_connection::file::Connection;
+    type Event = GenericUnixDatagramSocketTrigger<
+        RelocatableCountingBitSet,
+        dynamic_storage::file::Storage<State<RelocatableCountingBitSet, ()>>,
+    >;
+    type Monitoring = monitoring::file_lock::FileLockMonitoring;
+    type Reactor = reactor::recommended::Ipc;
+    type ArcThreadSafetyPolicy<T: Send + Debug + Abandonable> =
+        arc_sync_policy::single_threaded::SingleThreaded<T>;
+    type BlackboardMgmt<KeyType: Send + Sync + Debug + ZeroCopySend + 'static> =
+        dynamic_storage::file::Storage<KeyType>;
+    type BlackboardPayload = FileMemory<BumpAllocator>;
+    type UniqueId = iceoryx2::unique_id_generator::unique_system_id::UniqueSystemId;
+}
+
+impl iceoryx2::service::internal::ServiceInternal<Transport> for Transport {}
+
+/// Environment variable naming the root directory of every DEAR process's iceoryx2 files (the
+/// daemon's and every client's): see [`node_config`].
+pub const IOX2_ROOT_ENV: &str = "DEAR_IOX2_ROOT";
+
+/// The root when [`IOX2_ROOT_ENV`] is not set: on tmpfs on every Linux (the frames are
+/// memory, not disk), and needs no privileges (demo, tests, a daemon started by hand).
+pub const DEFAULT_IOX2_ROOT: &str = "/dev/shm/dear";
+
+/// The root the systemd unit gives the daemon: inside its `RuntimeDirectory=` `/run/deard`
+/// (in root-owned `/run`, so no other user can create or replace it first; mode `0750`, group
+/// `dear`, so only the group's members reach the files). Its clients set the same.
+pub const SERVICE_IOX2_ROOT: &str = "/run/deard/iceoryx2";
+
+/// Why [`node_config`] refused the configured iceoryx2 root.
+#[derive(Debug, thiserror::Error)]
+pub enum NodeConfigError {
+    #[error("{IOX2_ROOT_ENV}={value:?} must be an absolute path")]
+    NotAbsolute { value: String },
+    #[error(
+        "{IOX2_ROOT_ENV}={value:?} is not a path iceoryx2 accepts (at most 255 bytes, no NUL)"
+    )]
+    Path {
+        value: String,
+        #[source]
+        source: SemanticStringError,
+    },
+}
+
+/// The iceoryx2 configuration every DEAR node is created with: the daemon's, the SDK's and the
+/// CLI's. All of them must agree on the root directory, or a client looks for the service where
+/// the daemon never wrote it and waits forever.
+///
+/// The root is `$DEAR_IOX2_ROOT` when set and not empty, otherwise [`DEFAULT_IOX2_ROOT`]. The
+/// systemd unit sets [`SERVICE_IOX2_ROOT`] for the daemon; its clients set the same.
+///
+/// Why a variable and not "use `/run/deard/iceoryx2` when it exists": with that rule every
+/// DEAR process on a machine where the service has run since boot would join the service's
+/// root — the tests and a daemon started by hand too, which then fail unprivileged (they
+/// cannot write there) or, as root, mix with the installed service (tried: a concurrent test
+/// run's daemons moved into the installed service's root). An explicit setting keeps the
+/// default world and the service's apart.
+///
+/// iceoryx2's dead-node cleanup on node creation is left as configured; the daemon turns it
+/// off itself to report what it cleans.
+pub fn node_config() -> Result<Config, NodeConfigError> {
+    let from_env = std::env::var_os(IOX2_ROOT_ENV).filter(|v| !v.is_empty());
+    node_config_from(Config::global_config(), from_env.as_deref())
+}
+
+/// [`node_config`] with its inputs given: the base configuration and the environment
+/// variable's value.
+pub fn node_config_from(
+    base: &Config,
+    from_env: Option<&std::ffi::OsStr>,
+) -> Result<Config, NodeConfigError> {
+    let root = match from_env {
+        Some(value) => value.to_string_lossy().into_owned(),
+        None => DEFAULT_IOX2_ROOT.to_string(),
+    };
+    if !root.starts_with('/') {
+        return Err(NodeConfigError::NotAbsolute { value: root });
+    }
+    // iceoryx2 joins entries to the root itself; one trailing slash, as in its default.
+    let normalised = format!("{}/", root.trim_end_matches('/'));
+    let path = Path::new(normalised.as_bytes()).map_err(|source| NodeConfigError::Path {
+        value: root.clone(),
+        source,
+    })?;
+    let mut config = base.clone();
+    config.global.set_root_path(&path);
+    Ok(config)
+}
+
+/// The root directory of a configuration, as a path of this process.
+pub fn root_dir(config: &Config) -> std::path::PathBuf {
+    std::path::PathBuf::from(config.global.root_path().to_string())
+}
+
+/// Why the daemon cannot use its root directory ([`prepare_root`]).
+#[derive(Debug, thiserror::Error)]
+pub enum RootError {
+    #[error("cannot create the iceoryx2 root {}: {source}", path.display())]
+    Create {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// Typically a user outside the service's group: `/run/deard` is the group's only.
+    #[error("cannot reach the iceoryx2 root {}: {source} (is this user in the service's group? README, \"Apps as other users\")", path.display())]
+    NotReachable {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("cannot inspect the iceoryx2 root {}: {source}", path.display())]
+    Inspect {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("the iceoryx2 root {} is not a directory", path.display())]
+    NotADirectory { path: std::path::PathBuf },
+    /// Someone else made the directory first: using it would hand them the frames (they could
+    /// read and rewrite every file in it) — the pre-emption a world-writable parent such as
+    /// `/dev/shm` or `/tmp` allows.
+    #[error("the iceoryx2 root {} belongs to uid {owner}, not to this user (uid {me}) or root: another user created it; remove it or set {IOX2_ROOT_ENV} to a directory of this user's", path.display())]
+    ForeignOwner {
+        path: std::path::PathBuf,
+        owner: u32,
+        me: u32,
+    },
+}
+
+/// Creates the root directory with missing parents when it does not exist, mode `0770` (so
+/// the creator's group may connect; iceoryx2 itself would make it `0777`, open to every
+/// user). Clients call it too, so one started before the daemon does not open the root up.
+pub fn create_root(config: &Config) -> Result<std::path::PathBuf, RootError> {
+    use std::os::unix::fs::PermissionsExt;
+    let path = root_dir(config);
+    match std::fs::metadata(&path) {
+        Ok(_) => return Ok(path),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(source) => return Err(RootError::NotReachable { path, source }),
+    }
+    let created = std::fs::create_dir_all(&path)
+        // Explicitly: the process's umask (the unit's 0027) would take the group's write.
+        .and_then(|()| std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o770)));
+    match created {
+        Ok(()) => Ok(path),
+        // Made by another process meanwhile (a client and the daemon starting together).
+        Err(_) if path.is_dir() => Ok(path),
+        Err(source) => Err(RootError::Create { path, source }),
+    }
+}
+
+/// Makes sure the daemon's root directory is its own before any iceoryx2 file is made there:
+/// creates it ([`create_root`]) or checks that an existing one is a directory owned by this
+/// user or root.
+pub fn prepare_root(config: &Config) -> Result<std::path::PathBuf, RootError> {
+    use std::os::unix::fs::MetadataExt;
+    let path = create_root(config)?;
+    let meta = std::fs::symlink_metadata(&path).map_err(|source| RootError::Inspect {
+        path: path.clone(),
+        source,
+    })?;
+    if !meta.is_dir() {
+        return Err(RootError::NotADirectory { path });
+    }
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    let me = unsafe { libc::geteuid() };
+    if meta.uid() != me && meta.uid() != 0 {
+        return Err(RootError::ForeignOwner {
+            path,
+            owner: meta.uid(),
+            me,
+        });
+    }
+    Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::ffi::OsStr;
+
+    fn with_root(root: &str) -> Result<Config, NodeConfigError> {
+        node_config_from(&Config::default(), Some(OsStr::new(root)))
+    }
+
+    #[test]
+    fn no_variable_means_the_tmpfs_default() {
+        let config = node_config_from(&Config::default(), None).unwrap();
+        assert_eq!(config.global.root_path().to_string(), "/dev/shm/dear/");
+    }
+
+    #[test]
+    fn daemon_and_client_agree_however_the_root_is_spelled() {
+        let a = with_root("/srv/x//").unwrap();
+        let b = with_root("/srv/x").unwrap();
+        assert_eq!(a.global.root_path().to_string(), "/srv/x/");
+        assert_eq!(a.global.root_path(), b.global.root_path());
+        assert_eq!(root_dir(&a), std::path::PathBuf::from("/srv/x/"));
+    }
+
+    #[test]
+    fn a_relative_or_overlong_root_is_refused_by_name() {
+        let e = with_root("run/x").unwrap_err();
+        assert!(matches!(e, NodeConfigError::NotAbsolute { .. }), "{e}");
+        assert!(e.to_string().contains("DEAR_IOX2_ROOT=\"run/x\""), "{e}");
+        let e = with_root(&format!("/{}", "a".repeat(300))).unwrap_err();
+        assert!(matches!(e, NodeConfigError::Path { .. }), "{e}");
+    }
+
+    #[test]
+    fn the_base_configuration_is_kept() {
+        let mut base = Config::default();
+        base.global.node.cleanup_dead_nodes_on_creation = false;
+        let config = node_config_from(&base, Some(OsStr::new("/run/x"))).unwrap();
+        assert!(!config.global.node.cleanup_dead_nodes_on_creation);
+    }
+
+    #[test]
+    fn prepare_root_creates_a_group_directory_and_refuses_a_file() {
+        use std::os::unix::fs::PermissionsExt;
+        let tmp = tempfile::tempdir().unwrap();
+        let root = tmp.path().join("a/b");
+        let config = with_root(root.to_str().unwrap()).unwrap();
+        let made = prepare_root(&config).unwrap();
+        let mode = std::fs::metadata(&made).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o770, "the group may connect, others not: {mode:o}");
+        // Idempotent: a restarted daemon finds its own directory.
+        prepare_root(&config).unwrap();
+
+        let file = tmp.path().join("file");
+        std::fs::write(&file, b"x").unwrap();
+        let e = prepare_root(&with_root(file.to_str().unwrap()).unwrap()).unwrap_err();
+        assert!(matches!(e, RootError::NotADirectory { .. }), "{e}");
+        assert!(e.to_string().contains("file"), "{e}");
+    }
+
+    /// A root another user made first (in `/dev/shm` or `/tmp` anyone can) is refused, naming
+    /// its owner. Needs root to make a directory of another user; CI runs as root.
+    #[test]
+    fn prepare_root_refuses_a_directory_of_another_user() {
+        // SAFETY: geteuid has no preconditions.
+        if unsafe { libc::geteuid() } != 0 {
+            eprintln!("not root: cannot give a directory to another user; not checked");
+            return;
+        }
+        let tmp = tempfile::tempdir().unwrap();
+        let root = tmp.path().join("pre-empted");
+        std::fs::create_dir(&root).unwrap();
+        std::os::unix::fs::chown(&root, Some(65534), None).unwrap();
+        let e = prepare_root(&with_root(root.to_str().unwrap()).unwrap()).unwrap_err();
+        assert!(
+            matches!(e, RootError::ForeignOwner { owner: 65534, .. }),
+            "{e}"
+        );
+        assert!(e.to_string().contains("uid 65534"), "{e}");
+    }
+}
