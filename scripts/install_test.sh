@@ -237,6 +237,10 @@ as_client "$other_user" "$scratch/other" dump --count 1 --timeout-s 5 >"$scratch
 grep -q "Permission denied" "$scratch/dump-other.log" && grep -q "$client_root" "$scratch/dump-other.log" \
     || fail "$other_user's error does not name the root and the permission: $(cat "$scratch/dump-other.log")"
 echo "$other_user: $(tail -1 "$scratch/dump-other.log")"
+listing=$(env -i PATH=/usr/bin:/bin DEAR_IOX2_ROOT="$client_root" \
+    setpriv --reuid "$other_user" --regid "$other_user" --init-groups /usr/local/bin/dear list 2>&1) \
+    && fail "dear list as $other_user succeeded (it cannot enter the root): $listing"
+grep -q "Permission denied" <<<"$listing" || fail "dear list as $other_user does not say why: $listing"
 
 # The service is not in the default root: a client there does not see it. `dear list` with a
 # private /dev/shm, so it neither sees nor touches the host's /dev/shm/dear.

@@ -150,26 +150,30 @@ pub fn node_config_from(
 
 /// The root directory of a configuration, as a path of this process.
 pub fn root_dir(config: &Config) -> std::path::PathBuf {
-    std::path::PathBuf::from(config.global.root_path().to_string())
+    // Without iceoryx2's trailing slash: with it, a file there reads as "not a directory" to
+    // stat, not as a file.
+    let root = config.global.root_path().to_string();
+    let trimmed = root.trim_end_matches('/');
+    std::path::PathBuf::from(if trimmed.is_empty() { "/" } else { trimmed })
 }
 
 /// Why the daemon cannot use its root directory ([`prepare_root`]).
 #[derive(Debug, thiserror::Error)]
 pub enum RootError {
-    #[error("cannot create the iceoryx2 root {}: {source}", path.display())]
+    #[error("cannot create the iceoryx2 root {}", path.display())]
     Create {
         path: std::path::PathBuf,
         #[source]
         source: std::io::Error,
     },
     /// Typically a user outside the service's group: `/run/deard` is the group's only.
-    #[error("cannot reach the iceoryx2 root {}: {source} (is this user in the service's group? README, \"Apps as other users\")", path.display())]
+    #[error("cannot reach the iceoryx2 root {} (is this user in the service's group? README, \"Apps as other users\")", path.display())]
     NotReachable {
         path: std::path::PathBuf,
         #[source]
         source: std::io::Error,
     },
-    #[error("cannot inspect the iceoryx2 root {}: {source}", path.display())]
+    #[error("cannot inspect the iceoryx2 root {}", path.display())]
     Inspect {
         path: std::path::PathBuf,
         #[source]
@@ -197,7 +201,10 @@ pub fn create_root(config: &Config) -> Result<std::path::PathBuf, RootError> {
     match std::fs::metadata(&path) {
         Ok(_) => return Ok(path),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(source) => return Err(RootError::NotReachable { path, source }),
+        Err(source) if source.kind() == std::io::ErrorKind::PermissionDenied => {
+            return Err(RootError::NotReachable { path, source })
+        }
+        Err(source) => return Err(RootError::Inspect { path, source }),
     }
     let created = std::fs::create_dir_all(&path)
         // Explicitly: the process's umask (the unit's 0027) would take the group's write.
@@ -256,7 +263,7 @@ mod tests {
         let b = with_root("/srv/x").unwrap();
         assert_eq!(a.global.root_path().to_string(), "/srv/x/");
         assert_eq!(a.global.root_path(), b.global.root_path());
-        assert_eq!(root_dir(&a), std::path::PathBuf::from("/srv/x/"));
+        assert_eq!(root_dir(&a), std::path::PathBuf::from("/srv/x"));
     }
 
     #[test]
