@@ -4,7 +4,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh --rust-only
-cargo build --release --quiet -p deard -p dear-client
+cargo build --release --quiet -p deard -p dear-cli
 
 capture=${DEAR_DEMO_CAPTURE:-samples/demo}
 service=dear/demo/frames

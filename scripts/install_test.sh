@@ -24,7 +24,7 @@
 #
 # Everything installed is removed afterwards, also on failure. Refuses to run where deard is
 # already installed. About 20-40 s. Needs root, strace, setpriv, unshare, python3 and
-# systemd-analyze, and release binaries: cargo build --release -p deard -p dear-client.
+# systemd-analyze, and release binaries: cargo build --release -p deard -p dear-cli.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 unit=daemon/systemd/deard.service
@@ -38,7 +38,7 @@ for tool in systemd-analyze strace setpriv unshare python3 useradd userdel; do
     command -v "$tool" >/dev/null || fail "$tool is not installed"
 done
 for f in target/release/deard target/release/dear; do
-    [ -x "$f" ] || fail "$f missing: cargo build --release -p deard -p dear-client"
+    [ -x "$f" ] || fail "$f missing: cargo build --release -p deard -p dear-cli"
 done
 
 # --- 1. exposure --------------------------------------------------------------------------

@@ -17,7 +17,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
-cargo build --release --quiet -p dear-synth -p dear-client -p deard
+cargo build --release --quiet -p dear-synth -p dear-cli -p deard
 
 data=${DEAR_DATA:-data}/results
 out=out/results

@@ -9,6 +9,13 @@ echo "== msrv";         python3 scripts/msrv.py
 echo "== cargo fmt";    cargo fmt --all --check
 echo "== cargo clippy"; cargo clippy --workspace --all-targets --quiet -- -D warnings
 echo "== cargo test";   cargo test --workspace
+# The SDK stays thin: an app linking dear-client gets the protocol and iceoryx2, not the
+# pipeline, tract or the CLI's crates (issue 15).
+echo "== thin SDK"
+if cargo tree -p dear-client -e normal --prefix none | grep -E '^(tract|clap|indicatif|dear-pipeline) '; then
+    echo "dear-client pulls the crates above; the SDK must not" >&2
+    exit 1
+fi
 
 if [ -d train ]; then
     # Two commands, not `a && b`: errexit ignores a failure on the left of `&&`.
@@ -22,7 +29,7 @@ fi
 # all; and release binaries, about 8 minutes to build on 2 cores).
 if [ "$(id -u)" = 0 ]; then
     echo "== install recipe and unit (scripts/install_test.sh)"
-    cargo build --release --quiet -p deard -p dear-client
+    cargo build --release --quiet -p deard -p dear-cli
     scripts/install_test.sh
 else
     echo "== install recipe and unit: skipped (needs root; run sudo scripts/install_test.sh)"

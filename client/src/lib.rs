@@ -15,6 +15,7 @@
 //! [`dear_proto::service::QOS_SUBSCRIBER_BORROWED`] frames at once).
 
 pub mod frame;
+#[cfg(feature = "images")]
 pub mod save;
 pub mod subscriber;
 

@@ -1,10 +1,8 @@
-//! `dear`: the command-line client of `deard` (list, watch, dump). The logic lives in
-//! `client/src/cli/`; this file only parses, runs and maps the outcome to an exit status.
+//! `dear`: the command-line client of `deard` (list, watch, dump, eval). The logic lives in the
+//! `dear_cli` library (`cli/src/`); this file only parses, runs and maps the outcome to an exit
+//! status.
 
-// The CLI is compiled into the binary, not the SDK library: applications linking
-// `dear-client` should not pull clap, indicatif and the command implementations.
-#[path = "../cli/mod.rs"]
-mod cli;
+use dear_cli as cli;
 
 use std::process::ExitCode;
 

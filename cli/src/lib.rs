@@ -1,5 +1,8 @@
 //! The `dear` command line: argument definitions and dispatch. One module per subcommand;
 //! [`stats`] is the pure per-second aggregation behind `watch`.
+//!
+//! Its own crate so that the SDK (`dear-client`) stays thin: applications linking the SDK do
+//! not pull clap, indicatif, the pipeline or tract, which `dear eval` needs.
 
 pub mod dump;
 pub mod eval;
