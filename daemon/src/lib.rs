@@ -8,6 +8,7 @@
 
 pub mod capture;
 pub mod config;
+pub mod iceoryx_log;
 pub mod processing;
 pub mod publish;
 pub mod queue;

@@ -167,9 +167,8 @@ fn main() -> ExitCode {
         // killed the daemon after 80,000 frames of a soak run.
         .log_internal_errors(false)
         .init();
-    // iceoryx2 warns on every start that it uses its built-in defaults (we ship no iceoryx2
-    // config file on purpose); keep its own log to errors unless IOX2_LOG_LEVEL says otherwise.
-    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    // iceoryx2's warnings (a client that cannot connect) into this log.
+    deard::iceoryx_log::install();
 
     let shutdown = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
