@@ -98,6 +98,38 @@ fn expect_err_naming(result: Result<RgbdFrame, CaptureError>, file: &std::path::
     );
 }
 
+/// The replay's read: only the sensor planes. A damaged ground-truth or flow file does not cost
+/// it the frame (the full read reports it), a damaged sensor plane still does, by file.
+#[test]
+fn the_sensor_read_ignores_ground_truth_and_reports_sensor_planes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("cap");
+    write_capture(&dir, 3);
+    let cap = CaptureDir::open(&dir).unwrap();
+
+    let full = cap.read_frame(0).unwrap();
+    let sensor = cap.read_sensor_frame(0).unwrap();
+    assert_eq!(sensor.rgb, full.rgb);
+    assert_eq!(sensor.amplitude, full.amplitude);
+    assert_eq!(sensor.depth, full.depth);
+    assert_eq!(
+        (sensor.index, sensor.timestamp_ns),
+        (full.index, full.timestamp_ns)
+    );
+    assert_eq!(sensor.perturbation, full.perturbation);
+    assert!(sensor.gt_depth.is_none() && sensor.mask.is_none() && sensor.flow.is_none());
+
+    fs::write(cap.frame_paths(1).gt_depth, b"not a png").unwrap();
+    fs::write(cap.frame_paths(1).flow, b"PIEH").unwrap();
+    assert!(cap.read_frame(1).is_err());
+    cap.read_sensor_frame(1)
+        .expect("a damaged ground truth does not cost the sensor frame");
+
+    let depth = cap.frame_paths(2).depth;
+    fs::write(&depth, b"not a png").unwrap();
+    expect_err_naming(cap.read_sensor_frame(2), &depth, "cannot decode");
+}
+
 #[test]
 fn damaged_frames_are_reported_by_file() {
     let tmp = tempfile::tempdir().unwrap();

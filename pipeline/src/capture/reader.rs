@@ -66,11 +66,30 @@ impl CaptureDir {
     }
 
     /// Reads and checks the frame at `position` (0-based index into the manifest's frame list).
-    /// Optional files (ground truth, mask, flow) are read when present.
+    /// Optional files (ground truth, mask, flow) are read when present: what evaluation and
+    /// training need.
     ///
     /// # Panics
     /// If `position >= self.len()` (a programming error, not a data error).
     pub fn read_frame(&self, position: usize) -> Result<RgbdFrame, CaptureError> {
+        let mut frame = self.read_sensor_frame(position)?;
+        let paths = self.frame_paths(position);
+        let size = Some(self.size());
+        let scale = self.manifest.depth_scale;
+        frame.gt_depth = optional(&paths.gt_depth, |p| png::read_depth(p, size, scale))?;
+        frame.mask = optional(&paths.mask, |p| png::read_mask(p, size))?;
+        frame.flow = optional(&paths.flow, |p| flo::read_flo(p, size))?;
+        Ok(frame)
+    }
+
+    /// Reads and checks only what a sensor delivers at `position`: RGB, amplitude and depth
+    /// (ground truth, mask and flow stay `None`; the manifest's perturbation is kept, it is
+    /// metadata). What the daemon's replay needs: it decodes three PNGs a frame instead of up
+    /// to five plus a `.flo`, and a damaged ground-truth file does not cost it a good frame.
+    ///
+    /// # Panics
+    /// If `position >= self.len()` (a programming error, not a data error).
+    pub fn read_sensor_frame(&self, position: usize) -> Result<RgbdFrame, CaptureError> {
         let entry = &self.manifest.frames[position];
         let paths = FramePaths::new(&self.root, entry.id);
         let size = Some(self.size());
@@ -78,18 +97,15 @@ impl CaptureDir {
         let rgb = png::read_rgb(&paths.rgb, size)?;
         let amplitude = png::read_u16(&paths.amplitude, size)?.mapv(f32::from);
         let depth = png::read_depth(&paths.depth, size, scale)?;
-        let gt_depth = optional(&paths.gt_depth, |p| png::read_depth(p, size, scale))?;
-        let mask = optional(&paths.mask, |p| png::read_mask(p, size))?;
-        let flow = optional(&paths.flow, |p| flo::read_flo(p, size))?;
         Ok(RgbdFrame {
             index: entry.id,
             timestamp_ns: entry.timestamp_ns,
             rgb,
             amplitude,
             depth,
-            gt_depth,
-            mask,
-            flow,
+            gt_depth: None,
+            mask: None,
+            flow: None,
             perturbation: entry.perturbation,
         })
     }
