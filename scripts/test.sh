@@ -19,8 +19,8 @@ fi
 
 if [ -d train ]; then
     # Two commands, not `a && b`: errexit ignores a failure on the left of `&&`.
-    echo "== ruff";   .venv/bin/ruff check train scripts fixtures
-    .venv/bin/ruff format --check train scripts fixtures
+    echo "== ruff";   .venv/bin/ruff check train scripts fixtures tests/scripts
+    .venv/bin/ruff format --check train scripts fixtures tests/scripts
     echo "== pytest"; (cd train && ../.venv/bin/python -m pytest -q tests)
 fi
 

@@ -7,6 +7,7 @@
 pub mod dump;
 pub mod eval;
 pub mod list;
+pub mod record;
 pub mod stats;
 pub mod watch;
 
@@ -17,7 +18,7 @@ use anyhow::Context;
 use clap::{Parser, Subcommand};
 
 /// Command-line client of deard: find frame services, watch live statistics, dump frames,
-/// evaluate the pipeline on captures with ground truth.
+/// record them to MCAP, evaluate the pipeline on captures with ground truth.
 #[derive(Debug, Parser)]
 #[command(name = "dear", version, about)]
 pub struct Cli {
@@ -25,7 +26,7 @@ pub struct Cli {
     pub command: Command,
 }
 
-/// Subcommands. `record` is planned (docs/design.md, "Departures from the original plan").
+/// Subcommands. `record` writes MCAP (issue 15); `dump` writes the replayable capture format.
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// List the DEAR frame services on this machine, with their publishers and subscribers.
@@ -42,6 +43,15 @@ pub enum Command {
     /// which is ground truth) and the daemon's own frame id and timestamps in
     /// `source.published_frames`.
     Dump(dump::DumpArgs),
+    /// Record received frames to an MCAP file (Foxglove, Rerun, the `mcap` CLI open it).
+    ///
+    /// Channels `/dear/<camera>/depth` (foxglove.RawImage, 16UC1 mm or 32FC1 m, 0 = invalid),
+    /// `/rgb` (rgb8), `/confidence` (mono8) and `/calibration` (foxglove.CameraCalibration;
+    /// K, R, P zero, "uncalibrated", unless --intrinsics gives them: deard publishes none),
+    /// protobuf-encoded. Log time = capture time, publish time = the frame's publish time.
+    /// Stops after --count frames, --seconds seconds, or at Ctrl-C / SIGTERM; the file is
+    /// finished (summary and index) in every case. Lost frames are counted and printed.
+    Record(record::RecordArgs),
     /// Measure alignment and depth accuracy, and time per frame, on a capture with ground
     /// truth: the ToF input, the classical baselines (--baselines) and model bundles
     /// (--bundle), with the same pipeline code the daemon runs. Writes eval.json, eval.md and
@@ -55,6 +65,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::List => list::run(),
         Command::Watch(args) => watch::run(&args),
         Command::Dump(args) => dump::run(&args),
+        Command::Record(args) => record::run(&args),
         Command::Eval(args) => eval::run(&args),
     }
 }

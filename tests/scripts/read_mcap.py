@@ -1,0 +1,136 @@
+"""Reads a `dear record --mcap` file with the `mcap` package and checks what it holds.
+
+Used by `tests/tests/record_mcap.rs`; prints what it compares and exits non-zero (an
+AssertionError) on the first mismatch.
+
+Usage: read_mcap.py FILE --prefix /dear/cam0 --capture samples/demo/capture.json
+       [--frames N | --at-least N] [--depth-encoding 16UC1|32FC1] [--size 320x240]
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
+
+IMAGE_TOPICS = ("depth", "rgb", "confidence")
+
+
+def stamp_ns(msg: Any) -> int:
+    return int(msg.timestamp.seconds) * 1_000_000_000 + int(msg.timestamp.nanos)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("file", type=Path)
+    parser.add_argument("--prefix", required=True)
+    parser.add_argument("--capture", type=Path, required=True)
+    parser.add_argument("--frames", type=int)
+    parser.add_argument("--at-least", type=int)
+    parser.add_argument("--depth-encoding", default="16UC1")
+    parser.add_argument("--size", default="320x240")
+    args = parser.parse_args()
+    width, height = (int(v) for v in args.size.split("x"))
+    capture_stamps = {f["timestamp_ns"] for f in json.loads(args.capture.read_text())["frames"]}
+
+    topics = {leaf: f"{args.prefix}/{leaf}" for leaf in (*IMAGE_TOPICS, "calibration")}
+    by_topic: dict[str, list[tuple[Any, Any]]] = defaultdict(list)
+    with args.file.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        assert summary is not None, "no summary section: the file was not finished"
+        schemas = {s.name for s in summary.schemas.values()}
+        print(f"schemas: {sorted(schemas)}")
+        assert schemas == {"foxglove.RawImage", "foxglove.CameraCalibration"}, schemas
+        channel_topics = {
+            c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()
+        }
+        print(f"channels: {channel_topics}")
+        assert set(channel_topics) == set(topics.values()), channel_topics
+        assert channel_topics[topics["calibration"]] == "foxglove.CameraCalibration"
+        for _schema, channel, message, decoded in reader.iter_decoded_messages():
+            by_topic[channel.topic].append((message, decoded))
+        metadata = {m.name: m.metadata for m in reader.iter_metadata()}
+    print(f"metadata dear.record: {metadata.get('dear.record')}")
+    assert "dear.record" in metadata, metadata
+
+    counts = {leaf: len(by_topic[t]) for leaf, t in topics.items()}
+    print(f"messages per topic: {counts}")
+    n = counts["depth"]
+    assert all(c == n for c in counts.values()), counts
+    if args.frames is not None:
+        assert n == args.frames, (n, args.frames)
+    if args.at_least is not None:
+        assert n >= args.at_least, (n, args.at_least)
+    assert metadata["dear.record"]["frames"] == str(n), metadata
+
+    for leaf, topic in topics.items():
+        messages = by_topic[topic]
+        log_times = [m.log_time for m, _ in messages]
+        assert all(a < b for a, b in itertools.pairwise(log_times)), (
+            f"{leaf}: log times not strictly increasing: {log_times}"
+        )
+        stamps = [stamp_ns(d) for _, d in messages]
+        assert set(stamps) <= capture_stamps, f"{leaf}: stamps not in the capture: {stamps}"
+        # Log time = capture time; where the replay looped (capture time went back) the
+        # recorder moves the log time on by a constant offset, so the offset only changes there.
+        offsets = [lt - st for lt, st in zip(log_times, stamps, strict=True)]
+        assert offsets[0] == 0, f"{leaf}: first log time {log_times[0]} != capture {stamps[0]}"
+        for i in range(1, len(stamps)):
+            if offsets[i] != offsets[i - 1]:
+                assert stamps[i] <= stamps[i - 1], (leaf, i, stamps, offsets)
+        publish = [m.publish_time for m, _ in messages]
+        assert all(a < b for a, b in itertools.pairwise(publish)), publish
+        sequences = [m.sequence for m, _ in messages]
+        assert all(a < b for a, b in itertools.pairwise(sequences)), sequences
+        assert all(d.frame_id for _, d in messages)
+        if leaf == "depth":
+            print(f"log times (ns): {log_times}")
+            print(f"capture stamps (ns): {stamps}")
+            print(f"offsets (ns): {offsets}")
+
+    expected_encoding = {"depth": args.depth_encoding, "rgb": "rgb8", "confidence": "mono8"}
+    bytes_per_pixel = {"16UC1": 2, "32FC1": 4, "rgb8": 3, "mono8": 1}
+    for leaf in IMAGE_TOPICS:
+        for _, image in by_topic[topics[leaf]]:
+            assert (image.width, image.height) == (width, height), (leaf, image.width)
+            assert image.encoding == expected_encoding[leaf], (leaf, image.encoding)
+            assert image.step == width * bytes_per_pixel[image.encoding], (leaf, image.step)
+            assert len(image.data) == image.step * height, (leaf, len(image.data))
+    print(f"images: {width}x{height}, encodings {expected_encoding}")
+
+    for _, calibration in by_topic[topics["calibration"]]:
+        assert (calibration.width, calibration.height) == (width, height)
+        assert len(calibration.K) == 9 and calibration.K[0] == 0.0, list(calibration.K)
+
+    # deard: confidence is 0 exactly where depth is 0, so the frame's valid depth pixels are
+    # its non-zero confidence pixels; the decoded depth image must have the same number.
+    dtype = np.dtype("<u2") if args.depth_encoding == "16UC1" else np.dtype("<f4")
+    pairs = zip(by_topic[topics["depth"]], by_topic[topics["confidence"]], strict=True)
+    for i, ((dm, depth_msg), (cm, conf_msg)) in enumerate(pairs):
+        assert dm.sequence == cm.sequence and dm.log_time == cm.log_time
+        depth = np.frombuffer(depth_msg.data, dtype=dtype).reshape(height, width)
+        confidence = np.frombuffer(conf_msg.data, dtype=np.uint8).reshape(height, width)
+        valid_depth = int(np.count_nonzero(depth))
+        valid_confidence = int(np.count_nonzero(confidence))
+        valid = depth[depth > 0]
+        print(
+            f"frame {i} (sequence {dm.sequence}): valid depth pixels {valid_depth}, "
+            f"non-zero confidence {valid_confidence}, depth range "
+            f"{valid.min() if valid.size else '-'}..{valid.max() if valid.size else '-'}"
+        )
+        assert valid_depth > 0
+        assert valid_depth == valid_confidence, (i, valid_depth, valid_confidence)
+        assert np.all(np.isfinite(depth)) and np.all(depth >= 0)
+    print("ok")
+
+
+if __name__ == "__main__":
+    main()
