@@ -11,7 +11,7 @@ mod mutate;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use dear_pipeline::model::manifest::GRAPH_ROLES;
+use dear_pipeline::model::GraphRole;
 use dear_pipeline::model::{BundleError, Manifest};
 use mutate::{apply_bytes, apply_json, arbitrary_json, byte_edits, json_edit, Step};
 use proptest::prelude::*;
@@ -27,7 +27,7 @@ fn shipped() -> PathBuf {
 fn parse_checked(text: &str, path: &Path) -> Result<Option<String>, TestCaseError> {
     match Manifest::parse(text, path) {
         Ok(m) => {
-            for role in GRAPH_ROLES {
+            for role in GraphRole::ALL {
                 prop_assert!(m.graph(role).is_some(), "accepted without graph {role}");
             }
             // Written back, it is accepted again with the same content. (The informational

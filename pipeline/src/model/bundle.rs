@@ -15,9 +15,7 @@ use tract_onnx::tract_hir::infer::Factoid;
 use tract_onnx::tract_hir::internal::DimLike;
 
 use crate::model::error::BundleError;
-use crate::model::manifest::{
-    contract, output_contract, static_role, Manifest, Normalisation, GRAPH_ROLES,
-};
+use crate::model::manifest::{output_contract, GraphRole, Manifest, Normalisation};
 
 /// A verified, parsed bundle, ready to be instantiated for a stream resolution.
 #[derive(Debug, Clone)]
@@ -30,7 +28,7 @@ pub struct ModelBundle {
 /// One parsed graph and where it came from.
 #[derive(Debug, Clone)]
 pub(crate) struct LoadedGraph {
-    pub role: &'static str,
+    pub role: GraphRole,
     pub path: PathBuf,
     pub model: InferenceModel,
     /// Input names in the graph's own input order.
@@ -56,8 +54,8 @@ impl ModelBundle {
         let text = std::fs::read_to_string(&manifest_path)
             .map_err(|e| BundleError::io(&manifest_path, e))?;
         let manifest = Manifest::parse(&text, &manifest_path)?;
-        let mut graphs = Vec::with_capacity(GRAPH_ROLES.len());
-        for role in GRAPH_ROLES {
+        let mut graphs = Vec::with_capacity(GraphRole::ALL.len());
+        for role in GraphRole::ALL {
             let spec = manifest
                 .graph(role)
                 .expect("Manifest::parse checked every role");
@@ -109,16 +107,21 @@ impl ModelBundle {
 
     /// Whether `refine.onnx` takes the RGB image (every variant but `norgb` / `deeptof`).
     pub fn refine_uses_rgb(&self) -> bool {
-        self.graph("refine").input_names.iter().any(|n| n == "rgb")
+        self.graph(GraphRole::Refine)
+            .input_names
+            .iter()
+            .any(|n| n == "rgb")
     }
 
     /// How the chain applies the refine graph's output (format 2), or `None` when the graph
     /// outputs the refined depth itself (format 1).
     pub fn refine_apply(&self) -> Option<&crate::model::manifest::RefineApply> {
-        self.manifest.graph("refine").and_then(|g| g.apply.as_ref())
+        self.manifest
+            .graph(GraphRole::Refine)
+            .and_then(|g| g.apply.as_ref())
     }
 
-    pub(crate) fn graph(&self, role: &str) -> &LoadedGraph {
+    pub(crate) fn graph(&self, role: GraphRole) -> &LoadedGraph {
         self.graphs
             .iter()
             .find(|g| g.role == role)
@@ -137,12 +140,12 @@ pub(crate) fn hex_sha256(bytes: &[u8]) -> String {
 /// Parses one verified graph and checks its actual inputs and outputs against the manifest and
 /// the chain's contract (the manifest could be right and the file from another export).
 fn parse_graph(
-    role: &str,
+    role: GraphRole,
     path: PathBuf,
     bytes: &[u8],
     spec: &crate::model::manifest::GraphSpec,
 ) -> Result<LoadedGraph, BundleError> {
-    let graph = static_role(role);
+    let graph = role.name();
     let onnx_err = |e: TractError| BundleError::Onnx {
         path: path.clone(),
         graph,
@@ -156,7 +159,7 @@ fn parse_graph(
     let model = tract_onnx::onnx()
         .model_for_read(&mut Cursor::new(bytes))
         .map_err(onnx_err)?;
-    let contract = contract(role).expect("every role has a contract");
+    let contract = role.contract();
     let mut input_names = Vec::new();
     for (i, outlet) in model.input_outlets().map_err(onnx_err)?.iter().enumerate() {
         let name = model.node(outlet.node).name.clone();
@@ -207,7 +210,7 @@ fn parse_graph(
         )));
     }
     Ok(LoadedGraph {
-        role: graph,
+        role,
         path,
         model,
         input_names,

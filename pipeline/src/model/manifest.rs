@@ -143,15 +143,15 @@ pub(crate) struct GraphOutput {
 
 /// The output the chain reads from graph `role` (`apply`: the bundle's refine `apply`, which
 /// only the refine graph's output depends on).
-pub(crate) fn output_contract(role: &str, apply: Option<&RefineApply>) -> GraphOutput {
+pub(crate) fn output_contract(role: GraphRole, apply: Option<&RefineApply>) -> GraphOutput {
     match (role, apply) {
-        ("refine", Some(a)) => GraphOutput {
+        (GraphRole::Refine, Some(a)) => GraphOutput {
             name: "refine_maps",
             channels: a.channels,
             stride: a.stride,
         },
         _ => {
-            let (name, channels) = contract(role).expect("every role has a contract").output;
+            let (name, channels) = role.contract().output;
             GraphOutput {
                 name,
                 channels,
@@ -180,46 +180,66 @@ impl TensorSpec {
     }
 }
 
-/// The roles of the three graphs, in the order the chain runs them.
-pub const GRAPH_ROLES: [&str; 3] = ["flow", "fuse", "refine"];
+/// The role of one of a bundle's three graphs; `model.json` names them `flow`, `fuse` and
+/// `refine` under `graphs`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum GraphRole {
+    /// Rough flow from RGB and amplitude.
+    Flow,
+    /// Fusion of the rough flow with the calibration's flow.
+    Fuse,
+    /// Depth refinement.
+    Refine,
+}
+
+impl GraphRole {
+    /// Every role, in the order the chain runs them.
+    pub const ALL: [GraphRole; 3] = [GraphRole::Flow, GraphRole::Fuse, GraphRole::Refine];
+
+    /// The role's key in `model.json`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            GraphRole::Flow => "flow",
+            GraphRole::Fuse => "fuse",
+            GraphRole::Refine => "refine",
+        }
+    }
+
+    /// The I/O contract of the role (train/README.md, "Graph I/O contract").
+    pub(crate) const fn contract(self) -> Contract {
+        match self {
+            GraphRole::Flow => Contract {
+                inputs: &[("rgb", 3, true), ("amplitude", 1, true)],
+                output: ("flow", 2),
+            },
+            GraphRole::Fuse => Contract {
+                inputs: &[("flow_rough", 2, true), ("flow_convt", 2, true)],
+                output: ("flow_refined", 2),
+            },
+            GraphRole::Refine => Contract {
+                inputs: &[
+                    ("amplitude", 1, true),
+                    ("depth", 1, true),
+                    ("rgb", 3, false),
+                    ("classical", 1, false),
+                ],
+                output: ("depth_refined", 1),
+            },
+        }
+    }
+}
+
+impl std::fmt::Display for GraphRole {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 /// What the chain feeds a graph and reads from it: `(name, channels, required)` per input and
 /// `(name, channels)` of the single output.
 pub(crate) struct Contract {
     pub inputs: &'static [(&'static str, usize, bool)],
     pub output: (&'static str, usize),
-}
-
-/// The I/O contract of each role (train/README.md, "Graph I/O contract").
-pub(crate) fn contract(role: &str) -> Option<Contract> {
-    match role {
-        "flow" => Some(Contract {
-            inputs: &[("rgb", 3, true), ("amplitude", 1, true)],
-            output: ("flow", 2),
-        }),
-        "fuse" => Some(Contract {
-            inputs: &[("flow_rough", 2, true), ("flow_convt", 2, true)],
-            output: ("flow_refined", 2),
-        }),
-        "refine" => Some(Contract {
-            inputs: &[
-                ("amplitude", 1, true),
-                ("depth", 1, true),
-                ("rgb", 3, false),
-                ("classical", 1, false),
-            ],
-            output: ("depth_refined", 1),
-        }),
-        _ => None,
-    }
-}
-
-/// The role name as a `'static` string (for error values).
-pub(crate) fn static_role(role: &str) -> &'static str {
-    GRAPH_ROLES
-        .into_iter()
-        .find(|r| *r == role)
-        .unwrap_or("unknown")
 }
 
 impl Manifest {
@@ -283,8 +303,8 @@ impl Manifest {
                 n.amplitude_percentile
             )));
         }
-        for role in GRAPH_ROLES {
-            let Some(g) = m.graphs.get(role) else {
+        for role in GraphRole::ALL {
+            let Some(g) = m.graphs.get(role.name()) else {
                 return Err(bad(format!(
                     "graph \"{role}\" is missing from \"graphs\" (the chain needs flow, fuse and refine)"
                 )));
@@ -294,8 +314,8 @@ impl Manifest {
         Ok(m)
     }
 
-    fn check_graph(&self, role: &str, g: &GraphSpec, path: &Path) -> Result<(), BundleError> {
-        let graph = static_role(role);
+    fn check_graph(&self, role: GraphRole, g: &GraphSpec, path: &Path) -> Result<(), BundleError> {
+        let graph = role.name();
         let broken = |message: String| BundleError::Contract {
             path: path.to_path_buf(),
             graph,
@@ -316,28 +336,28 @@ impl Manifest {
             )));
         }
         match (&g.apply, role, self.format_version) {
-            (None, "refine", 2) => {
+            (None, GraphRole::Refine, 2) => {
                 return Err(broken(
                     "format_version 2 needs \"apply\" on the refine graph".into(),
                 ))
             }
-            (Some(_), "refine", 1) => {
+            (Some(_), GraphRole::Refine, 1) => {
                 return Err(broken(
                     "\"apply\" needs format_version 2 (this manifest says 1)".into(),
                 ))
             }
-            (Some(_), "flow" | "fuse", _) => {
+            (Some(_), GraphRole::Flow | GraphRole::Fuse, _) => {
                 return Err(broken("only the refine graph may have \"apply\"".into()))
             }
             (Some(a), _, _) => check_apply(a, self.input_size_multiple).map_err(&broken)?,
             (None, _, _) => {}
         }
-        let contract = contract(role).expect("GRAPH_ROLES all have contracts");
+        let contract = role.contract();
         check_tensors(&g.inputs, contract.inputs, "input").map_err(&broken)?;
         let output = output_contract(role, g.apply.as_ref());
         let out = [(output.name, output.channels, true)];
         check_tensors(&g.outputs, &out, "output").map_err(&broken)?;
-        if role == "refine" {
+        if role == GraphRole::Refine {
             let has_rgb = g.inputs.iter().any(|t| t.name == "rgb");
             let wants_rgb = !matches!(self.variant.as_str(), "norgb" | "deeptof");
             if has_rgb != wants_rgb {
@@ -373,9 +393,9 @@ impl Manifest {
         Ok(())
     }
 
-    /// The spec of graph `role` (`flow`, `fuse` or `refine`); present after [`parse`](Self::parse).
-    pub fn graph(&self, role: &str) -> Option<&GraphSpec> {
-        self.graphs.get(role)
+    /// The spec of graph `role`; present after [`parse`](Self::parse).
+    pub fn graph(&self, role: GraphRole) -> Option<&GraphSpec> {
+        self.graphs.get(role.name())
     }
 }
 

@@ -19,5 +19,5 @@ pub mod runner;
 
 pub use bundle::ModelBundle;
 pub use error::BundleError;
-pub use manifest::{Manifest, Normalisation, RefineApply};
+pub use manifest::{GraphRole, Manifest, Normalisation, RefineApply};
 pub use runner::{BundleRunner, RunnerOptions};

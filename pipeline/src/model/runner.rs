@@ -18,7 +18,7 @@ use crate::frame::Flow;
 use crate::model::bundle::{LoadedGraph, ModelBundle};
 use crate::model::error::BundleError;
 use crate::model::kernel_apply::{apply_gated, blend_classical, GatedKernel};
-use crate::model::manifest::{contract, output_contract, GraphOutput};
+use crate::model::manifest::{output_contract, GraphOutput, GraphRole};
 
 /// Largest padded side a runner accepts: beyond it a single plane is gigabytes.
 pub const MAX_SIDE: usize = 16384;
@@ -99,7 +99,7 @@ impl BundleRunner {
             ..RunOptions::default()
         };
         let apply = bundle.refine_apply();
-        let build = |role: &str| {
+        let build = |role: GraphRole| {
             let output = output_contract(role, apply);
             GraphRunner::new(bundle.graph(role), padded, &run_options, output)
         };
@@ -119,9 +119,9 @@ impl BundleRunner {
             height,
             padded,
             refine_uses_rgb: bundle.refine_uses_rgb(),
-            flow: build("flow")?,
-            fuse: build("fuse")?,
-            refine: build("refine")?,
+            flow: build(GraphRole::Flow)?,
+            fuse: build(GraphRole::Fuse)?,
+            refine: build(GraphRole::Refine)?,
             refine_tail,
             blended,
         })
@@ -195,7 +195,7 @@ impl BundleRunner {
         mut out: ArrayViewMut2<f32>,
     ) -> Result<(), BundleError> {
         let missing = |what: &str| BundleError::Run {
-            graph: "refine",
+            graph: GraphRole::Refine.name(),
             message: format!("this refinement variant needs {what}"),
         };
         let amp = [amplitude];
@@ -254,7 +254,7 @@ fn executor(_threads: usize) -> Result<Option<multithread::Executor>, String> {
 
 /// One optimised graph with its reusable state and its input order.
 struct GraphRunner {
-    role: &'static str,
+    role: GraphRole,
     state: TypedSimpleState,
     /// `(name, channels)` per graph input, in the graph's order.
     inputs: Vec<(String, usize)>,
@@ -288,10 +288,10 @@ impl GraphRunner {
     ) -> Result<Self, BundleError> {
         let onnx_err = |e: TractError| BundleError::Onnx {
             path: graph.path.clone(),
-            graph: graph.role,
+            graph: graph.role.name(),
             message: format!("{e:#}"),
         };
-        let contract = contract(graph.role).expect("every role has a contract");
+        let contract = graph.role.contract();
         let (hp, wp) = padded;
         let mut model = graph.model.clone();
         let mut inputs = Vec::with_capacity(graph.input_names.len());
@@ -314,7 +314,7 @@ impl GraphRunner {
         if got.iter().cloned().collect::<TVec<TDim>>() != want {
             return Err(BundleError::Contract {
                 path: graph.path.clone(),
-                graph: graph.role,
+                graph: graph.role.name(),
                 message: format!(
                     "output {:?} has shape {got:?} for {hp}x{wp} inputs, expected {want:?}",
                     output.name
@@ -347,7 +347,7 @@ impl GraphRunner {
         outputs: &mut [ArrayViewMut2<f32>],
     ) -> Result<(), BundleError> {
         let run_err = |message: String| BundleError::Run {
-            graph: self.role,
+            graph: self.role.name(),
             message,
         };
         let out_dim = outputs
@@ -392,7 +392,7 @@ impl GraphRunner {
             for p in planes {
                 if p.dim() != dim {
                     return Err(BundleError::InputShape {
-                        graph: self.role,
+                        graph: self.role.name(),
                         input: static_input(name),
                         expected: dim,
                         found: p.dim(),
