@@ -19,12 +19,16 @@
 #    README's client setting (DEAR_IOX2_ROOT) as a user in the service's group (added to it
 #    with the README's command), receives frames; a user outside the group is refused with an
 #    error that says why; a client without the setting (default root) does not see the
-#    service; nothing of the daemon's is in /dev/shm.
+#    service; nothing of the daemon's is in /dev/shm. The C example (client-c/examples/
+#    receive.c, linked here against target/release/libdear_client.a) receives 5 frames as the
+#    same user in the group.
 # 6. SIGTERM stops the daemon cleanly (exit 0, "stopped" logged, STOPPING=1 sent).
 #
 # Everything installed is removed afterwards, also on failure. Refuses to run where deard is
-# already installed. About 20-40 s. Needs root, strace, setpriv, unshare, python3 and
-# systemd-analyze, and release binaries: cargo build --release -p deard -p dear-cli.
+# already installed. About 20-40 s. Needs root, strace, setpriv, unshare, python3,
+# systemd-analyze and cc, and release builds: cargo build --release -p deard -p dear-cli, then
+# cargo build --release -p dear-client-c on its own (built with the others, the SDK in
+# libdear_client.a would get the CLI's features: the pipeline and tract).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 unit=daemon/systemd/deard.service
@@ -34,11 +38,12 @@ fail() { echo "install_test: FAIL: $*" >&2; exit 1; }
 step() { echo "== $*"; }
 
 [ "$(id -u)" = 0 ] || fail "must run as root (it installs into /usr/local and /etc, adds a user)"
-for tool in systemd-analyze strace setpriv unshare python3 useradd userdel; do
+for tool in systemd-analyze strace setpriv unshare python3 useradd userdel cc; do
     command -v "$tool" >/dev/null || fail "$tool is not installed"
 done
-for f in target/release/deard target/release/dear; do
-    [ -x "$f" ] || fail "$f missing: cargo build --release -p deard -p dear-cli"
+build="cargo build --release -p deard -p dear-cli && cargo build --release -p dear-client-c"
+for f in target/release/deard target/release/dear target/release/libdear_client.a; do
+    [ -f "$f" ] || fail "$f missing: $build"
 done
 
 # --- 1. exposure --------------------------------------------------------------------------
@@ -229,6 +234,26 @@ as_client "$app_user" "$scratch/app" dump --count 5 --timeout-s 30 >"$scratch/du
 n=$(find "$scratch/app/dump/frames" -name '*.depth.png' | wc -l)
 [ "$n" = 5 ] || fail "$app_user wrote $n depth frames, not 5"
 echo "$app_user: 5 frames"
+
+# An app in C: the SDK's C example, linked against the static library as README's "C" says,
+# as the same user with the same setting.
+step "C example (client-c/examples/receive.c) as $app_user, DEAR_IOX2_ROOT=$client_root"
+if ar t target/release/libdear_client.a | grep -q tract; then
+    fail "target/release/libdear_client.a holds tract: build -p dear-client-c on its own ($build)"
+fi
+cc -O2 -Iclient-c/include client-c/examples/receive.c target/release/libdear_client.a \
+    -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc -o "$scratch/receive" \
+    || fail "cannot build the C example"
+chmod 755 "$scratch/receive"
+rc=0
+(cd / && env -i PATH=/usr/bin:/bin DEAR_IOX2_ROOT="$client_root" \
+    setpriv --reuid "$app_user" --regid "$app_user" --init-groups \
+    "$scratch/receive" dear/cam0/frames 5 30000) >"$scratch/receive-app.log" 2>&1 || rc=$?
+[ "$rc" = 0 ] || fail "the C example as $app_user exited $rc: $(cat "$scratch/receive-app.log")"
+n=$(grep -c '^frame [0-9]* [0-9]*x[0-9]* valid=[1-9][0-9]* run=[0-9a-f]* seq=[0-9]*$' \
+    "$scratch/receive-app.log" || true)
+[ "$n" = 5 ] || fail "the C example printed $n frame lines, not 5: $(cat "$scratch/receive-app.log")"
+echo "$app_user (C): $(tail -1 "$scratch/receive-app.log")"
 
 step "dear dump as $other_user (not in the group): refused, and says why"
 rc=0

@@ -30,6 +30,9 @@ fi
 if [ "$(id -u)" = 0 ]; then
     echo "== install recipe and unit (scripts/install_test.sh)"
     cargo build --release --quiet -p deard -p dear-cli
+    # On its own: built with the CLI, the SDK in libdear_client.a would get the CLI's features
+    # (images: the pipeline and tract).
+    cargo build --release --quiet -p dear-client-c
     scripts/install_test.sh
 else
     echo "== install recipe and unit: skipped (needs root; run sudo scripts/install_test.sh)"

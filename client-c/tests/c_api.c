@@ -1,0 +1,179 @@
+/*
+ * Checks of libdear_client's C API from C, run by tests/c_api.rs (which builds this file
+ * against the crate's static library and starts deard where a mode needs one):
+ *
+ *     c_api arguments BAD_SERVICE    NULL arguments, a bad service name (no daemon needed)
+ *     c_api timeout SERVICE          no publisher: DEAR_TIMEOUT, naming the service
+ *     c_api frames SERVICE           a running deard: planes, header, the held-frames limit
+ *
+ * Prints "ok <check>" per check; on the first failed check prints "FAIL ..." and exits 1.
+ */
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "dear_client.h"
+
+static int checks = 0;
+
+#define CHECK(cond, ...)                                                              \
+    do {                                                                              \
+        if (!(cond)) {                                                                \
+            fprintf(stdout, "FAIL %s:%d: %s: ", __FILE__, __LINE__, #cond);           \
+            fprintf(stdout, __VA_ARGS__);                                             \
+            fprintf(stdout, " (last error: %s)\n", dear_last_error());                \
+            exit(1);                                                                  \
+        }                                                                             \
+        checks++;                                                                     \
+    } while (0)
+
+#define EXPECT_STATUS(call, expected)                                                 \
+    do {                                                                              \
+        dear_status got_ = (call);                                                    \
+        CHECK(got_ == (expected), "%s returned %s, expected %s", #call,               \
+              dear_status_name(got_), dear_status_name(expected));                    \
+    } while (0)
+
+static void ok(const char *what) {
+    printf("ok %s\n", what);
+    fflush(stdout);
+}
+
+static int mentions(const char *needle) { return strstr(dear_last_error(), needle) != NULL; }
+
+static void arguments(const char *bad_service) {
+    CHECK(dear_last_error() != NULL && dear_last_error()[0] == '\0', "no failure yet: empty");
+
+    dear_client *client = (dear_client *)0x1; /* must be overwritten with NULL */
+    EXPECT_STATUS(dear_client_connect(NULL, &client), DEAR_INVALID_ARGUMENT);
+    CHECK(client == NULL, "*out is NULL after a failure");
+    CHECK(mentions("service"), "the message names the NULL argument");
+    EXPECT_STATUS(dear_client_connect("dear/cam0/frames", NULL), DEAR_INVALID_ARGUMENT);
+    CHECK(mentions("out"), "the message names the NULL argument");
+
+    dear_frame *frame = (dear_frame *)0x1;
+    EXPECT_STATUS(dear_client_wait(NULL, 0, &frame), DEAR_INVALID_ARGUMENT);
+    CHECK(frame == NULL, "*out is NULL after a failure");
+    CHECK(mentions("client"), "the message names the NULL argument");
+    EXPECT_STATUS(dear_client_wait(NULL, 0, NULL), DEAR_INVALID_ARGUMENT);
+
+    size_t len = 99;
+    CHECK(dear_frame_header(NULL) == NULL, "no header of no frame");
+    CHECK(mentions("dear_frame_header") && mentions("frame"), "names function and argument");
+    CHECK(dear_frame_depth(NULL, &len) == NULL && len == 0, "no depth of no frame");
+    CHECK(dear_frame_rgb(NULL, &len) == NULL && len == 0, "no rgb of no frame");
+    CHECK(dear_frame_confidence(NULL, NULL) == NULL, "no confidence of no frame");
+    CHECK(mentions("dear_frame_confidence"), "names the function");
+    dear_frame_release(NULL); /* no-ops, like free(NULL) */
+    dear_client_free(NULL);
+    ok("NULL arguments: DEAR_INVALID_ARGUMENT or NULL, with a message");
+
+    client = (dear_client *)0x1;
+    EXPECT_STATUS(dear_client_connect(bad_service, &client), DEAR_CONNECT_FAILED);
+    CHECK(client == NULL, "*out is NULL after a failure");
+    CHECK(mentions(bad_service), "the message names the service");
+    printf("bad service: %s\n", dear_last_error());
+    ok("a bad service name: DEAR_CONNECT_FAILED naming it");
+
+    CHECK(strcmp(dear_status_name(DEAR_TOO_MANY_FRAMES_HELD), "DEAR_TOO_MANY_FRAMES_HELD") == 0,
+          "status names");
+    CHECK(sizeof(dear_header) == 192, "the header is the protocol's 192 bytes");
+    ok("status names, header size");
+}
+
+static void timeout(const char *service) {
+    dear_client *client = NULL;
+    EXPECT_STATUS(dear_client_connect(service, &client), DEAR_OK);
+    dear_frame *frame = (dear_frame *)0x1;
+    EXPECT_STATUS(dear_client_wait(client, 200, &frame), DEAR_TIMEOUT);
+    CHECK(frame == NULL, "no frame on a timeout");
+    CHECK(mentions(service) && mentions("200 ms"), "the timeout names service and time");
+    EXPECT_STATUS(dear_client_wait(client, 0, &frame), DEAR_TIMEOUT);
+    dear_client_free(client);
+    ok("no publisher: DEAR_TIMEOUT naming the service");
+}
+
+static void check_frame(const dear_frame *frame) {
+    const dear_header *h = dear_frame_header(frame);
+    CHECK(h != NULL, "a header");
+    CHECK(h->magic == DEAR_MAGIC && h->version == DEAR_FORMAT_VERSION, "magic, version");
+    size_t pixels = (size_t)h->width * h->height;
+    CHECK(h->depth_offset == 0 && h->rgb_offset == 4 * pixels &&
+              h->confidence_offset == 7 * pixels && h->payload_size == 8 * pixels,
+          "offsets of a %" PRIu32 "x%" PRIu32 " frame", h->width, h->height);
+    CHECK(h->run_id != 0, "deard draws a run id");
+    size_t n_depth = 0, n_rgb = 0, n_conf = 0;
+    const float *depth = dear_frame_depth(frame, &n_depth);
+    const uint8_t *rgb = dear_frame_rgb(frame, &n_rgb);
+    const uint8_t *conf = dear_frame_confidence(frame, &n_conf);
+    CHECK(depth && rgb && conf, "planes");
+    CHECK(n_depth == pixels && n_rgb == 3 * pixels && n_conf == pixels,
+          "plane lengths %zu %zu %zu for %zu pixels", n_depth, n_rgb, n_conf, pixels);
+    /* Zero-copy: the planes lie one after another in the sample, as the header says. */
+    CHECK((const uint8_t *)depth + h->rgb_offset == rgb, "rgb follows depth in the sample");
+    CHECK((const uint8_t *)depth + h->confidence_offset == conf, "confidence follows rgb");
+    CHECK(((uintptr_t)depth % sizeof(float)) == 0, "depth is aligned for float");
+    size_t valid = 0, agree = 0;
+    for (size_t i = 0; i < pixels; i++) {
+        valid += depth[i] > 0.0f;
+        agree += (depth[i] == 0.0f) == (conf[i] == 0);
+    }
+    CHECK(valid > 0, "valid depth");
+    CHECK(agree == pixels, "confidence is 0 exactly where depth is 0 (%zu of %zu)", agree, pixels);
+}
+
+static void frames(const char *service) {
+    dear_client *client = NULL;
+    EXPECT_STATUS(dear_client_connect(service, &client), DEAR_OK);
+    dear_frame *held[DEAR_MAX_HELD_FRAMES] = {NULL};
+    uint64_t last_sequence = 0;
+    for (int i = 0; i < DEAR_MAX_HELD_FRAMES; i++) {
+        EXPECT_STATUS(dear_client_wait(client, 20000, &held[i]), DEAR_OK);
+        check_frame(held[i]);
+        uint64_t sequence = dear_frame_header(held[i])->sequence;
+        CHECK(i == 0 || sequence > last_sequence, "sequence increases");
+        last_sequence = sequence;
+    }
+    ok("frames: header and planes");
+
+    dear_frame *extra = (dear_frame *)0x1;
+    EXPECT_STATUS(dear_client_wait(client, 20000, &extra), DEAR_TOO_MANY_FRAMES_HELD);
+    CHECK(extra == NULL, "no frame beyond the limit");
+    CHECK(mentions(service) && mentions("dear_frame_release"), "the message says what to do");
+    printf("held: %s\n", dear_last_error());
+    /* The held frames are intact meanwhile. */
+    check_frame(held[0]);
+    ok("a third held frame: DEAR_TOO_MANY_FRAMES_HELD");
+
+    dear_frame_release(held[0]);
+    EXPECT_STATUS(dear_client_wait(client, 20000, &held[0]), DEAR_OK);
+    check_frame(held[0]);
+    ok("after a release the next frame comes");
+
+    /* Frames outlive their client until released. */
+    dear_client_free(client);
+    check_frame(held[1]);
+    dear_frame_release(held[0]);
+    dear_frame_release(held[1]);
+    ok("frames released after their client");
+}
+
+int main(int argc, char **argv) {
+    if (argc != 3) {
+        fprintf(stderr, "usage: %s arguments|timeout|frames SERVICE\n", argv[0]);
+        return 2;
+    }
+    if (strcmp(argv[1], "arguments") == 0) {
+        arguments(argv[2]);
+    } else if (strcmp(argv[1], "timeout") == 0) {
+        timeout(argv[2]);
+    } else if (strcmp(argv[1], "frames") == 0) {
+        frames(argv[2]);
+    } else {
+        fprintf(stderr, "unknown mode %s\n", argv[1]);
+        return 2;
+    }
+    printf("%d checks passed\n", checks);
+    return 0;
+}

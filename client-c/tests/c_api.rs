@@ -1,0 +1,459 @@
+//! The C API from C: `examples/receive.c` and `tests/c_api.c` are compiled with the system `cc`
+//! against this crate's `libdear_client.a` and run against a real `deard`, each test with its
+//! own service under one private iceoryx2 root (`DEAR_IOX2_ROOT` in a temporary directory).
+//!
+//! The tests build the static library themselves (`cargo build -p dear-client-c` with the cargo
+//! that runs them: a no-op when it is fresh), since cargo builds a library without an rlib
+//! for no integration test. `deard` is another package's binary: the tests use
+//! target/<profile>/deard when it is there (`cargo test --workspace` builds it) and otherwise
+//! build it with `cargo build -p deard` first.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::{Duration, Instant};
+
+/// What the static library needs from the system (`cargo rustc -p dear-client-c --release --
+/// --print native-static-libs`; the same list is in the README and the header).
+const NATIVE_LIBS: &[&str] = &[
+    "-lgcc_s",
+    "-lutil",
+    "-lrt",
+    "-lpthread",
+    "-lm",
+    "-ldl",
+    "-lc",
+];
+
+/// target/<profile>, from this test executable (target/<profile>/deps/c_api-…).
+fn profile_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("current exe");
+    exe.parent()
+        .and_then(Path::parent)
+        .expect("target/<profile>/deps/<test>")
+        .to_path_buf()
+}
+
+fn crate_dir() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Builds a package with the cargo that runs these tests, in this test's profile.
+fn cargo_build(package: &str) {
+    let mut command = Command::new(env!("CARGO"));
+    command.args(["build", "--quiet", "-p", package]);
+    if profile_dir().file_name().is_some_and(|n| n == "release") {
+        command.arg("--release");
+    }
+    let status = command
+        .current_dir(crate_dir())
+        .status()
+        .expect("run cargo build");
+    assert!(status.success(), "cargo build -p {package} failed");
+}
+
+/// The workspace's `deard`, built first when missing.
+fn deard() -> &'static Path {
+    static DEARD: OnceLock<PathBuf> = OnceLock::new();
+    DEARD.get_or_init(|| {
+        let path = profile_dir().join("deard");
+        if !path.is_file() {
+            eprintln!("{} missing: cargo build -p deard", path.display());
+            cargo_build("deard");
+        }
+        assert!(path.is_file(), "{} not built", path.display());
+        path
+    })
+}
+
+/// The iceoryx2 root of every process of these tests, daemons and C programs alike: a
+/// temporary directory (removed when the test process exits normally), set once as this
+/// process's `DEAR_IOX2_ROOT` too, for the Rust SDK's client.
+fn iox2_root() -> &'static Path {
+    static ROOT: OnceLock<tempfile::TempDir> = OnceLock::new();
+    ROOT.get_or_init(|| {
+        let dir = tempfile::tempdir().expect("temporary directory");
+        // Set before any client of this process exists: every test calls this first, and
+        // the others wait here until it is done.
+        std::env::set_var(dear_proto::IOX2_ROOT_ENV, dir.path().join("iceoryx2"));
+        dir
+    })
+    .path()
+}
+
+/// This crate's static library, built now: `cargo test` builds a library without an rlib
+/// for no test (the integration tests cannot link it), so it would be missing or stale.
+fn static_library() -> &'static Path {
+    static LIBRARY: OnceLock<PathBuf> = OnceLock::new();
+    LIBRARY.get_or_init(|| {
+        cargo_build("dear-client-c");
+        let path = profile_dir().join("libdear_client.a");
+        assert!(path.is_file(), "{} not built", path.display());
+        path
+    })
+}
+
+/// A C source of this crate compiled against the static library, once per test process.
+fn c_program(source: &'static str) -> PathBuf {
+    static BUILT: OnceLock<std::sync::Mutex<BTreeMap<&'static str, PathBuf>>> = OnceLock::new();
+    let built = BUILT.get_or_init(Default::default);
+    let mut built = built.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(path) = built.get(source) {
+        return path.clone();
+    }
+    let library = static_library();
+    let out_dir = profile_dir().join("dear-client-c-tests");
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let source_path = crate_dir().join(source);
+    let name = source_path.file_stem().unwrap().to_owned();
+    let binary = out_dir.join(name);
+    let output = Command::new("cc")
+        .args(["-std=c11", "-Wall", "-Wextra", "-Werror", "-O1", "-g"])
+        .arg("-I")
+        .arg(crate_dir().join("include"))
+        .arg(&source_path)
+        .arg(library)
+        .args(NATIVE_LIBS)
+        .arg("-o")
+        .arg(&binary)
+        .output()
+        .expect("run cc (a C compiler is needed to link Rust anyway)");
+    assert!(
+        output.status.success(),
+        "cc {source} failed:\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    built.insert(source, binary.clone());
+    binary
+}
+
+/// A unique service name per test and process.
+fn unique_service(test: &str) -> String {
+    format!("dear-test/{}/c-{test}/frames", std::process::id())
+}
+
+/// A running `deard` replaying `samples/demo` in a loop at its recorded pace, alignment only;
+/// killed on drop.
+struct Daemon {
+    child: Child,
+    log: PathBuf,
+    _log_dir: tempfile::TempDir,
+}
+
+impl Daemon {
+    fn start(service: &str) -> Daemon {
+        let log_dir = tempfile::tempdir().unwrap();
+        let log = log_dir.path().join("deard.log");
+        let child = Command::new(deard())
+            .args(["--service", service, "--refine", "none", "--loop"])
+            .args([
+                "--pacing",
+                "timestamps",
+                "--stats-interval",
+                "1",
+                "--replay",
+            ])
+            .arg(crate_dir().join("../samples/demo"))
+            .env(dear_proto::IOX2_ROOT_ENV, iox2_root().join("iceoryx2"))
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(File::create(&log).unwrap())
+            .spawn()
+            .expect("spawn deard");
+        let mut daemon = Daemon {
+            child,
+            log,
+            _log_dir: log_dir,
+        };
+        daemon.wait_for_log("serving", Duration::from_secs(60));
+        daemon
+    }
+
+    fn log_text(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    fn wait_for_log(&mut self, needle: &str, timeout: Duration) {
+        let deadline = Instant::now() + timeout;
+        while !self.log_text().contains(needle) {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                panic!("deard exited ({status}):\n{}", self.log_text());
+            }
+            assert!(
+                Instant::now() < deadline,
+                "deard did not log {needle:?} in {timeout:?}:\n{}",
+                self.log_text()
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Runs a compiled C program with the tests' root and returns its output (killed after 120 s).
+fn run(binary: &Path, args: &[&str]) -> Output {
+    let mut child = Command::new(binary)
+        .args(args)
+        .env(dear_proto::IOX2_ROOT_ENV, iox2_root().join("iceoryx2"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run the C program");
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while child.try_wait().unwrap().is_none() {
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+fn describe(output: &Output) -> String {
+    format!(
+        "{}\nstdout:\n{}\nstderr:\n{}",
+        output.status,
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    )
+}
+
+/// One line of `receive`: `frame <id> <w>x<h> valid=<n> run=<hex> seq=<n>`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Line {
+    frame_id: u64,
+    width: u32,
+    height: u32,
+    valid: usize,
+    run_id: u64,
+    sequence: u64,
+}
+
+fn parse_line(line: &str) -> Line {
+    fn parse(line: &str) -> Option<Line> {
+        let parts: Vec<&str> = line.split(' ').collect();
+        if parts.len() != 6 || parts[0] != "frame" {
+            return None;
+        }
+        let (width, height) = parts[2].split_once('x')?;
+        Some(Line {
+            frame_id: parts[1].parse().ok()?,
+            width: width.parse().ok()?,
+            height: height.parse().ok()?,
+            valid: parts[3].strip_prefix("valid=")?.parse().ok()?,
+            run_id: u64::from_str_radix(parts[4].strip_prefix("run=")?, 16).ok()?,
+            sequence: parts[5].strip_prefix("seq=")?.parse().ok()?,
+        })
+    }
+    parse(line).unwrap_or_else(|| panic!("not a frame line of receive: {line:?}"))
+}
+
+/// What the Rust SDK receives on `service` until stopped: `(run_id, sequence)` → the frame as
+/// `receive` would print it. Returns once the client is subscribed and has seen a frame.
+struct RustClient {
+    stop: Arc<AtomicBool>,
+    thread: std::thread::JoinHandle<BTreeMap<(u64, u64), Line>>,
+}
+
+impl RustClient {
+    fn start(service: &str) -> RustClient {
+        let stop = Arc::new(AtomicBool::new(false));
+        let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+        let service = service.to_string();
+        let thread = {
+            let stop = stop.clone();
+            std::thread::spawn(move || {
+                let client = sdk::Client::connect(&service).expect("the Rust SDK connects");
+                let mut seen = BTreeMap::new();
+                while !stop.load(Ordering::Relaxed) {
+                    let Some(frame) = client.wait(Duration::from_millis(100)).expect("receive")
+                    else {
+                        continue;
+                    };
+                    let h = frame.header();
+                    let line = Line {
+                        frame_id: h.frame_id,
+                        width: h.width,
+                        height: h.height,
+                        valid: frame.depth().iter().filter(|&&z| z > 0.0).count(),
+                        run_id: h.run_id,
+                        sequence: h.sequence,
+                    };
+                    seen.insert((line.run_id, line.sequence), line);
+                    let _ = ready_tx.send(());
+                }
+                seen
+            })
+        };
+        ready_rx
+            .recv_timeout(Duration::from_secs(60))
+            .expect("the Rust SDK received no frame in 60 s");
+        RustClient { stop, thread }
+    }
+
+    fn finish(self) -> BTreeMap<(u64, u64), Line> {
+        self.stop.store(true, Ordering::Relaxed);
+        self.thread.join().expect("the Rust client thread")
+    }
+}
+
+#[test]
+fn the_example_receives_frames_and_agrees_with_the_rust_sdk() {
+    iox2_root();
+    let receive = c_program("examples/receive.c");
+    let service = unique_service("example");
+    let _daemon = Daemon::start(&service);
+    let rust = RustClient::start(&service);
+
+    let output = run(&receive, &[&service, "5", "20000"]);
+    let by_rust = rust.finish();
+    assert!(
+        output.status.success(),
+        "receive failed: {}",
+        describe(&output)
+    );
+    let stdout = String::from_utf8(output.stdout.clone()).unwrap();
+    let lines: Vec<Line> = stdout.lines().map(parse_line).collect();
+    assert_eq!(lines.len(), 5, "{}", describe(&output));
+
+    for line in &lines {
+        assert_eq!(
+            (line.width, line.height),
+            (320, 240),
+            "samples/demo's size: {line:?}"
+        );
+        assert!(line.valid > 0, "no valid depth: {line:?}");
+        assert!(line.valid <= 320 * 240);
+        assert_ne!(line.run_id, 0, "deard draws a run id");
+        assert_eq!(line.run_id, lines[0].run_id, "one daemon, one run");
+    }
+    for pair in lines.windows(2) {
+        assert!(
+            pair[1].sequence > pair[0].sequence,
+            "sequence must increase: {pair:?}"
+        );
+    }
+    // frame_id increases too, but for the replay's loop (42 frames): it restarts at most
+    // once in 5 consecutive frames.
+    let restarts = lines
+        .windows(2)
+        .filter(|p| p[1].frame_id <= p[0].frame_id)
+        .count();
+    assert!(restarts <= 1, "frame ids go back more than once: {lines:?}");
+
+    // The same samples as the Rust SDK saw them: same frame, same valid depth.
+    let matched: Vec<_> = lines
+        .iter()
+        .filter_map(|line| {
+            by_rust
+                .get(&(line.run_id, line.sequence))
+                .map(|r| (line, r))
+        })
+        .collect();
+    for (c, rust) in &matched {
+        assert_eq!(
+            c, rust,
+            "the C example and the Rust SDK disagree on a sample"
+        );
+    }
+    assert!(
+        matched.len() >= 3,
+        "the Rust SDK saw only {} of the example's 5 samples: {lines:?} vs {:?}",
+        matched.len(),
+        by_rust.keys().collect::<Vec<_>>()
+    );
+}
+
+#[test]
+fn null_arguments_and_a_bad_service_name_are_reported() {
+    iox2_root();
+    let c_api = c_program("tests/c_api.c");
+    let bad = "no spaces/in service names";
+    let output = run(&c_api, &["arguments", bad]);
+    assert!(output.status.success(), "{}", describe(&output));
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(stdout.contains("checks passed"), "{}", describe(&output));
+    // The whole error chain: what failed, for which service, and why.
+    let message = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("bad service: "))
+        .expect("the message printed");
+    assert!(
+        message.contains(&format!("cannot connect to {bad:?}")),
+        "{message}"
+    );
+    assert!(message.contains("contains ' '"), "{message}");
+
+    // The example exits non-zero and prints the message.
+    let receive = c_program("examples/receive.c");
+    let output = run(&receive, &[bad, "1", "100"]);
+    assert_eq!(output.status.code(), Some(1), "{}", describe(&output));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("DEAR_CONNECT_FAILED") && stderr.contains(bad),
+        "{}",
+        describe(&output)
+    );
+}
+
+#[test]
+fn without_a_daemon_waiting_times_out() {
+    iox2_root();
+    let c_api = c_program("tests/c_api.c");
+    let service = unique_service("timeout");
+    let output = run(&c_api, &["timeout", &service]);
+    assert!(output.status.success(), "{}", describe(&output));
+
+    let receive = c_program("examples/receive.c");
+    let output = run(&receive, &[&service, "1", "300"]);
+    assert_eq!(output.status.code(), Some(3), "{}", describe(&output));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("DEAR_TIMEOUT")
+            && stderr.contains(&format!("no frame from {service:?} within 300 ms")),
+        "{}",
+        describe(&output)
+    );
+    assert!(output.stdout.is_empty(), "{}", describe(&output));
+}
+
+#[test]
+fn frames_are_zero_copy_and_at_most_two_are_held() {
+    iox2_root();
+    let c_api = c_program("tests/c_api.c");
+    let service = unique_service("frames");
+    let daemon = Daemon::start(&service);
+    let output = run(&c_api, &["frames", &service]);
+    assert!(
+        output.status.success(),
+        "{}\ndeard log:\n{}",
+        describe(&output),
+        daemon.log_text()
+    );
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    for check in [
+        "ok frames: header and planes",
+        "ok a third held frame: DEAR_TOO_MANY_FRAMES_HELD",
+        "ok after a release the next frame comes",
+        "ok frames released after their client",
+    ] {
+        assert!(stdout.contains(check), "{check:?} missing:\n{stdout}");
+    }
+    let held = BufReader::new(stdout.as_bytes())
+        .lines()
+        .map_while(Result::ok)
+        .find(|l| l.starts_with("held: "))
+        .expect("the held-frames message");
+    assert!(held.contains(&format!("{service:?}")), "{held}");
+}
