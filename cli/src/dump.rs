@@ -13,19 +13,19 @@
 //!   frame's `perturbation`, which means ground truth.
 
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use anyhow::{bail, Context};
 use clap::Args;
 use dear_client::save::{auto_depth_range, save_depth_colorized, save_rgb_depth_blend};
-use dear_client::{Client, Frame, ReceiveError};
+use dear_client::{Client, Frame};
 use dear_pipeline::capture::layout::MANIFEST_FILE;
 use dear_pipeline::capture::{CaptureManifest, CaptureWriter, Intrinsics};
 use dear_pipeline::frame::RgbdFrame;
 use serde_json::{json, Value};
 
 use super::stats::flag_names;
-use super::{Interrupted, StopFlag};
+use super::{next_frame, parse_intrinsics, Interrupted, StopFlag};
 
 /// What `source.amplitude` says, and the `--help` text repeats.
 const AMPLITUDE_NOTE: &str = "confidence×257 (deard publishes no amplitude)";
@@ -33,8 +33,6 @@ const AMPLITUDE_NOTE: &str = "confidence×257 (deard publishes no amplitude)";
 const DEFAULT_HFOV_DEG: f32 = 70.0;
 /// Opacity of the depth tint in the `.blend.png` previews.
 const PREVIEW_ALPHA: f32 = 0.4;
-/// How long one wait may block, bounding the reaction time to Ctrl-C.
-const POLL: Duration = Duration::from_millis(100);
 
 /// Arguments of `dear dump` (the command's help text is on [`super::Command::Dump`]).
 #[derive(Debug, Args)]
@@ -73,33 +71,13 @@ fn parse_timeout(s: &str) -> Result<f64, String> {
     }
 }
 
-fn parse_intrinsics(s: &str) -> Result<Intrinsics, String> {
-    let values: Vec<f32> = s
-        .split(',')
-        .map(|v| v.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| format!("{s:?} is not four comma-separated numbers FX,FY,CX,CY"))?;
-    let [fx, fy, cx, cy] = values[..] else {
-        return Err(format!(
-            "{s:?} has {} values, expected FX,FY,CX,CY",
-            values.len()
-        ));
-    };
-    if !(fx > 0.0 && fy > 0.0 && values.iter().all(|v| v.is_finite())) {
-        return Err(format!(
-            "{s:?}: focal lengths must be positive and all values finite"
-        ));
-    }
-    Ok(Intrinsics { fx, fy, cx, cy })
-}
-
 pub fn run(args: &DumpArgs) -> anyhow::Result<()> {
     check_out_dir(&args.out)?;
     let stop = StopFlag::install()?;
     let client = Client::connect(&args.service)?;
     let timeout = Duration::from_secs_f64(args.timeout_s);
 
-    let Some(first) = next_frame(&client, timeout, &stop)? else {
+    let Some(first) = next_frame(&client, timeout, None, &stop)? else {
         if stop.is_set() {
             return Err(Interrupted(format!(
                 "interrupted before any frame arrived from {:?}; nothing written",
@@ -121,7 +99,7 @@ pub fn run(args: &DumpArgs) -> anyhow::Result<()> {
     progress.inc(1);
     let mut outcome = Ok(());
     while dump.len() < args.count {
-        match next_frame(&client, timeout, &stop) {
+        match next_frame(&client, timeout, None, &stop) {
             Ok(Some(frame)) => {
                 if let Err(e) = dump.add(frame) {
                     outcome = Err(e);
@@ -192,34 +170,6 @@ fn check_out_dir(out: &Path) -> anyhow::Result<()> {
         );
     }
     Ok(())
-}
-
-/// Waits for the next good frame; malformed ones are skipped with a warning. `Ok(None)` on
-/// timeout or when `stop` was set.
-fn next_frame(
-    client: &Client,
-    timeout: Duration,
-    stop: &StopFlag,
-) -> anyhow::Result<Option<Frame>> {
-    let deadline = Instant::now() + timeout;
-    loop {
-        if stop.is_set() {
-            return Ok(None);
-        }
-        let left = deadline.saturating_duration_since(Instant::now());
-        if left.is_zero() {
-            return Ok(None);
-        }
-        match client.wait(left.min(POLL)) {
-            Ok(Some(frame)) => return Ok(Some(frame)),
-            Ok(None) => {}
-            Err(ReceiveError::BadFrame { service, source }) => {
-                tracing::warn!(%service, error = %source, "skipping a malformed frame");
-            }
-            Err(_) if stop.is_set() => return Ok(None),
-            Err(e) => return Err(e.into()),
-        }
-    }
 }
 
 /// A dump in progress: the capture writer plus what goes into `source` at the end.

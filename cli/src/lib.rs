@@ -114,6 +114,63 @@ impl StopFlag {
     }
 }
 
+/// How long one wait may block, bounding the reaction time to Ctrl-C and to `--seconds`.
+const POLL: std::time::Duration = std::time::Duration::from_millis(100);
+
+/// Waits for the next good frame (`dump` and `record`); malformed ones are skipped with a
+/// warning. `Ok(None)` on timeout, at `end_at`, or when `stop` was set.
+pub fn next_frame(
+    client: &dear_client::Client,
+    timeout: std::time::Duration,
+    end_at: Option<std::time::Instant>,
+    stop: &StopFlag,
+) -> anyhow::Result<Option<dear_client::Frame>> {
+    let mut deadline = std::time::Instant::now() + timeout;
+    if let Some(end) = end_at {
+        deadline = deadline.min(end);
+    }
+    loop {
+        if stop.is_set() {
+            return Ok(None);
+        }
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        if left.is_zero() {
+            return Ok(None);
+        }
+        match client.wait(left.min(POLL)) {
+            Ok(Some(frame)) => return Ok(Some(frame)),
+            Ok(None) => {}
+            Err(dear_client::ReceiveError::BadFrame { service, source }) => {
+                tracing::warn!(%service, error = %source, "skipping a malformed frame");
+            }
+            Err(_) if stop.is_set() => return Ok(None),
+            Err(e) => return Err(e.into()),
+        }
+    }
+}
+
+/// `FX,FY,CX,CY`: the RGB camera's pinhole intrinsics given on the command line (`dump`,
+/// `record`; clap value parser).
+pub fn parse_intrinsics(s: &str) -> Result<dear_pipeline::capture::Intrinsics, String> {
+    let values: Vec<f32> = s
+        .split(',')
+        .map(|v| v.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{s:?} is not four comma-separated numbers FX,FY,CX,CY"))?;
+    let [fx, fy, cx, cy] = values[..] else {
+        return Err(format!(
+            "{s:?} has {} values, expected FX,FY,CX,CY",
+            values.len()
+        ));
+    };
+    if !(fx > 0.0 && fy > 0.0 && values.iter().all(|v| v.is_finite())) {
+        return Err(format!(
+            "{s:?}: focal lengths must be positive and all values finite"
+        ));
+    }
+    Ok(dear_pipeline::capture::Intrinsics { fx, fy, cx, cy })
+}
+
 /// Service name argument shared by the subcommands: the default camera's frame service.
 pub fn default_service() -> String {
     dear_proto::default_service_name(dear_proto::DEFAULT_CAMERA)

@@ -1,4 +1,4 @@
-//! `dear`: the command-line client of `deard` (list, watch, dump, eval). The logic lives in the
+//! `dear`: the command-line client of `deard` (list, watch, dump, record, eval). The logic lives in the
 //! `dear_cli` library (`cli/src/`); this file only parses, runs and maps the outcome to an exit
 //! status.
 

@@ -39,14 +39,11 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use clap::Args;
-use dear_client::{Client, Frame, ReceiveError};
+use dear_client::{Client, Frame};
 use dear_pipeline::capture::Intrinsics;
 
 use self::mcap_file::{DepthEncoding, FrameData, RecordSummary, Recorder};
-use super::{Interrupted, StopFlag};
-
-/// How long one wait may block, bounding the reaction time to Ctrl-C and to `--seconds`.
-const POLL: Duration = Duration::from_millis(100);
+use super::{next_frame, parse_intrinsics, Interrupted, StopFlag};
 
 /// Arguments of `dear record` (the command's help text is on [`super::Command::Record`]).
 #[derive(Debug, Args)]
@@ -85,27 +82,6 @@ fn parse_seconds(s: &str) -> Result<f64, String> {
     } else {
         Err(format!("{s} s is not in (0, 31536000]"))
     }
-}
-
-/// `FX,FY,CX,CY` (the same format as `dear dump --intrinsics`).
-fn parse_intrinsics(s: &str) -> Result<Intrinsics, String> {
-    let values: Vec<f32> = s
-        .split(',')
-        .map(|v| v.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| format!("{s:?} is not four comma-separated numbers FX,FY,CX,CY"))?;
-    let [fx, fy, cx, cy] = values[..] else {
-        return Err(format!(
-            "{s:?} has {} values, expected FX,FY,CX,CY",
-            values.len()
-        ));
-    };
-    if !(fx > 0.0 && fy > 0.0 && values.iter().all(|v| v.is_finite())) {
-        return Err(format!(
-            "{s:?}: focal lengths must be positive and all values finite"
-        ));
-    }
-    Ok(Intrinsics { fx, fy, cx, cy })
 }
 
 /// Why the frame loop ended.
@@ -296,38 +272,6 @@ fn report(args: &RecordArgs, s: &RecordSummary, elapsed: Duration) -> String {
 /// Removes the file created at start when nothing was written to it.
 fn remove_unused(path: &Path) {
     let _ = std::fs::remove_file(path);
-}
-
-/// Waits for the next good frame; malformed ones are skipped with a warning. `Ok(None)` on
-/// timeout, at `end_at`, or when `stop` was set.
-fn next_frame(
-    client: &Client,
-    timeout: Duration,
-    end_at: Option<Instant>,
-    stop: &StopFlag,
-) -> anyhow::Result<Option<Frame>> {
-    let mut deadline = Instant::now() + timeout;
-    if let Some(end) = end_at {
-        deadline = deadline.min(end);
-    }
-    loop {
-        if stop.is_set() {
-            return Ok(None);
-        }
-        let left = deadline.saturating_duration_since(Instant::now());
-        if left.is_zero() {
-            return Ok(None);
-        }
-        match client.wait(left.min(POLL)) {
-            Ok(Some(frame)) => return Ok(Some(frame)),
-            Ok(None) => {}
-            Err(ReceiveError::BadFrame { service, source }) => {
-                tracing::warn!(%service, error = %source, "skipping a malformed frame");
-            }
-            Err(_) if stop.is_set() => return Ok(None),
-            Err(e) => return Err(e.into()),
-        }
-    }
 }
 
 #[cfg(test)]
