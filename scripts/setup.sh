@@ -71,3 +71,23 @@ if ! $rust_only && [ -d train ]; then
         echo "$want" > "$stamp"
     fi
 fi
+
+# The Python client package `dear` (client-py/: PyO3 + maturin) in .venv, as an editable
+# install whose extension module is built with the dev profile (dependencies at opt-level 3).
+# Rebuilt only when its sources, the SDK's or the lock file change.
+if ! $rust_only && [ -d client-py ]; then
+    stamp=.venv/.dear-client-py-installed
+    want=$({
+        rustc -V
+        find client-py/Cargo.toml client-py/pyproject.toml client-py/src client-py/python \
+            client/Cargo.toml client/src proto/Cargo.toml proto/src Cargo.lock \
+            -type f ! -name '*.so' ! -name '*.pyc' -print0 | sort -z | xargs -0 sha256sum
+    } | sha256sum | cut -d' ' -f1)
+    if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ] \
+            || ! .venv/bin/python -c 'import dear' 2>/dev/null; then
+        echo "setup: building the Python client package (client-py, import dear) into .venv"
+        .venv/bin/pip install --quiet maturin==1.16.0
+        VIRTUAL_ENV="$PWD/.venv" .venv/bin/maturin develop --quiet -m client-py/Cargo.toml
+        echo "$want" > "$stamp"
+    fi
+fi

@@ -19,9 +19,11 @@ fi
 
 if [ -d train ]; then
     # Two commands, not `a && b`: errexit ignores a failure on the left of `&&`.
-    echo "== ruff";   .venv/bin/ruff check train scripts fixtures tests/scripts
-    .venv/bin/ruff format --check train scripts fixtures tests/scripts
+    echo "== ruff";   .venv/bin/ruff check train scripts fixtures tests/scripts client-py
+    .venv/bin/ruff format --check train scripts fixtures tests/scripts client-py
     echo "== pytest"; (cd train && ../.venv/bin/python -m pytest -q tests)
+    # The Python client package against a real target/debug/deard (built by cargo test above).
+    echo "== pytest (client-py)"; (cd client-py && ../.venv/bin/python -m pytest -q tests)
 fi
 
 # The install tier: the README's install recipe and the hardened systemd unit, on this machine

@@ -1,0 +1,131 @@
+"""Type stubs of the `dear` package (the Rust extension `dear._dear`, client-py/src/lib.rs)."""
+
+from collections.abc import Iterator
+from types import TracebackType
+from typing import Final, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+DEFAULT_SERVICE: Final[str]
+"""`"dear/cam0/frames"`."""
+MAX_BORROWED_FRAMES: Final[int]
+"""Samples one subscriber may hold at once (2): frames not released plus their arrays' samples."""
+FORMAT_VERSION: Final[int]
+FLAG_ALIGNED: Final[int]
+FLAG_REFINED_NETWORK: Final[int]
+FLAG_REFINED_CLASSICAL: Final[int]
+FLAG_CALIBRATION_ESTIMATED: Final[int]
+FLAG_CALIBRATION_ONLINE: Final[int]
+FLAG_NETWORK_OUTPUT_REJECTED: Final[int]
+
+class DearError(Exception):
+    """Base class of the errors of the dear package."""
+
+class ConnectError(DearError):
+    """Subscribing failed; the message is the Rust error chain and names the service."""
+
+class ReceiveError(DearError):
+    """Receiving or waiting for a frame failed; the message is the Rust error chain."""
+
+class Header:
+    """A copy of the frame's 192-byte header (README "Frame layout")."""
+
+    @property
+    def version(self) -> int: ...
+    @property
+    def frame_id(self) -> int: ...
+    @property
+    def capture_timestamp_ns(self) -> int: ...
+    @property
+    def publish_timestamp_ns(self) -> int:
+        """`CLOCK_MONOTONIC` at publication: compare with `time.monotonic_ns()`."""
+    @property
+    def width(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+    @property
+    def calib_tx(self) -> float: ...
+    @property
+    def calib_ty(self) -> float: ...
+    @property
+    def calib_cx(self) -> float: ...
+    @property
+    def calib_cy(self) -> float: ...
+    @property
+    def calib_residual_px(self) -> float: ...
+    @property
+    def calib_quality(self) -> float: ...
+    @property
+    def calib_age_frames(self) -> int: ...
+    @property
+    def flags(self) -> int:
+        """`FLAG_*` bits."""
+    @property
+    def bundle(self) -> str: ...
+    @property
+    def stage_latency_us(self) -> dict[str, int]:
+        """capture, preprocess, flow, fuse, warp, refine, publish, total (µs; 0 = not run)."""
+    @property
+    def frames_skipped(self) -> int: ...
+    @property
+    def frames_dropped(self) -> int: ...
+    @property
+    def run_id(self) -> int: ...
+    @property
+    def sequence(self) -> int: ...
+
+class Frame:
+    """One received frame. Arrays are read-only zero-copy views that keep the sample alive."""
+
+    @property
+    def header(self) -> Header: ...
+    @property
+    def depth(self) -> npt.NDArray[np.float32]:
+        """(H, W) metres, 0 = invalid. Raises ValueError after `release()`."""
+    @property
+    def rgb(self) -> npt.NDArray[np.uint8]:
+        """(H, W, 3). Raises ValueError after `release()`."""
+    @property
+    def confidence(self) -> npt.NDArray[np.uint8]:
+        """(H, W), 0 = invalid, 255 = measured and kept. Raises ValueError after `release()`."""
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(height, width)."""
+    @property
+    def released(self) -> bool: ...
+    def release(self) -> None:
+        """Drops this frame's reference to its sample (arrays taken before keep theirs)."""
+    def __enter__(self) -> Frame: ...
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> Literal[False]: ...
+
+class Subscriber:
+    """A subscription to one deard frame service (root: `$DEAR_IOX2_ROOT`, else /dev/shm/dear).
+
+    Not thread-safe: use it (and let its frames be freed) on the thread that made it.
+    """
+
+    def __init__(self, service: str = "dear/cam0/frames") -> None:
+        """Connects; raises ConnectError."""
+    @property
+    def service(self) -> str: ...
+    @property
+    def closed(self) -> bool: ...
+    def wait(self, timeout_s: float) -> Frame | None:
+        """Next frame within `timeout_s` seconds, else None. Releases the GIL while waiting."""
+    def try_receive(self) -> Frame | None: ...
+    def close(self) -> None: ...
+    def __enter__(self) -> Subscriber: ...
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> Literal[False]: ...
+    def __iter__(self) -> Iterator[Frame]: ...
+    def __next__(self) -> Frame: ...
