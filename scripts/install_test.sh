@@ -20,8 +20,9 @@
 #    with the README's command), receives frames; a user outside the group is refused with an
 #    error that says why; a client without the setting (default root) does not see the
 #    service; nothing of the daemon's is in /dev/shm. The C example (client-c/examples/
-#    receive.c, linked here against target/release/libdear_client.a) receives 5 frames as the
-#    same user in the group.
+#    receive.c, linked here against target/release/libdear_client.a) and a Python script
+#    (`import dear`, client-py, with the system python3) each receive 5 frames as the same
+#    user in the group: a Rust, a C and a Python app of another user than the daemon's.
 # 6. SIGTERM stops the daemon cleanly (exit 0, "stopped" logged, STOPPING=1 sent).
 #
 # Everything installed is removed afterwards, also on failure. Refuses to run where deard is
@@ -254,6 +255,45 @@ n=$(grep -c '^frame [0-9]* [0-9]*x[0-9]* valid=[1-9][0-9]* run=[0-9a-f]* seq=[0-
     "$scratch/receive-app.log" || true)
 [ "$n" = 5 ] || fail "the C example printed $n frame lines, not 5: $(cat "$scratch/receive-app.log")"
 echo "$app_user (C): $(tail -1 "$scratch/receive-app.log")"
+
+# An app in Python: the `dear` package (client-py/python/dear, built into place by
+# scripts/setup.sh) copied where the app user can read it, run by the system's python3 with its
+# numpy (the project's .venv lives in the checkout, which other users may not reach).
+step "Python (import dear) as $app_user, DEAR_IOX2_ROOT=$client_root"
+py=/usr/bin/python3
+"$py" -c 'import numpy' 2>/dev/null \
+    || fail "$py with numpy is needed (scripts/setup.sh installs python3-numpy)"
+ext=$(find client-py/python/dear -maxdepth 1 -name '_dear*.so' | head -1)
+[ -n "$ext" ] || fail "client-py is not built (scripts/setup.sh builds it into client-py/python/dear)"
+suffix=$("$py" -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')
+[ "${ext%"$suffix"}" != "$ext" ] \
+    || fail "$ext was built for another Python than $py (extension suffix $suffix)"
+install -d -m 755 "$scratch/py"
+cp -r client-py/python/dear "$scratch/py/"
+chmod -R a+rX "$scratch/py"
+cat >"$scratch/py/receive.py" <<'PY'
+import sys
+
+import dear
+
+with dear.Subscriber(sys.argv[1]) as sub:
+    for _ in range(int(sys.argv[2])):
+        frame = sub.wait(30.0)
+        if frame is None:
+            sys.exit(f"no frame from {sub.service} in 30 s")
+        with frame:
+            h = frame.header
+            valid = int((frame.depth > 0).sum())
+            print(f"frame {h.frame_id} {h.width}x{h.height} valid={valid} seq={h.sequence}")
+PY
+rc=0
+(cd / && env -i PATH=/usr/bin:/bin DEAR_IOX2_ROOT="$client_root" PYTHONPATH="$scratch/py" \
+    setpriv --reuid "$app_user" --regid "$app_user" --init-groups \
+    "$py" "$scratch/py/receive.py" dear/cam0/frames 5) >"$scratch/python-app.log" 2>&1 || rc=$?
+[ "$rc" = 0 ] || fail "the Python app as $app_user exited $rc: $(cat "$scratch/python-app.log")"
+n=$(grep -c '^frame [0-9]* [0-9]*x[0-9]* valid=[1-9][0-9]* seq=[0-9]*$' "$scratch/python-app.log" || true)
+[ "$n" = 5 ] || fail "the Python app printed $n frame lines, not 5: $(cat "$scratch/python-app.log")"
+echo "$app_user (Python): $(tail -1 "$scratch/python-app.log")"
 
 step "dear dump as $other_user (not in the group): refused, and says why"
 rc=0

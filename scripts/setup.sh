@@ -35,8 +35,9 @@ done
 # System packages: a C toolchain for -sys crates, pkg-config, and (for train/) Python's venv.
 packages=(build-essential pkg-config)
 # train/'s venv; strace for the install test (scripts/install_test.sh traces the daemon's system
-# calls against the unit's filter).
-$rust_only || packages+=(python3-venv strace)
+# calls against the unit's filter) and the system python3's numpy (it runs a Python app as
+# another user, who cannot reach the checkout's .venv).
+$rust_only || packages+=(python3-venv strace python3-numpy)
 missing=()
 for pkg in "${packages[@]}"; do
     dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
