@@ -54,8 +54,9 @@ pub fn save_depth_png16(path: impl AsRef<Path>, depth: ArrayView2<f32>) -> Resul
     Ok(png::write_depth(path.as_ref(), depth, DEPTH_PNG_SCALE)?)
 }
 
+/// The capture format's rule (0, negative or non-finite = no measurement).
 fn is_valid(z: f32) -> bool {
-    z > 0.0 && z.is_finite()
+    dear_pipeline::is_valid_depth(z)
 }
 
 /// A robust display range of the valid depth: the 1st to the 99th percentile, so a few flying

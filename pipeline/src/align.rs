@@ -86,7 +86,7 @@ impl StaticAligner {
 /// order) for speed; `values` is the reused buffer for it.
 fn median_valid_depth(depth: ArrayView2<f32>, values: &mut Vec<f32>) -> Option<f32> {
     values.clear();
-    let valid = |z: &f32| *z > 0.0 && z.is_finite();
+    let valid = |z: &f32| crate::geometry::is_valid_depth(*z);
     match depth.as_slice() {
         Some(d) => values.extend(d.iter().step_by(7).copied().filter(valid)),
         None => values.extend(depth.iter().step_by(7).copied().filter(valid)),

@@ -34,7 +34,7 @@ impl Calibration {
     /// Returns `None` for a non-positive or non-finite depth (no valid flow there).
     #[inline]
     pub fn flow_at(&self, z: f32) -> Option<(f32, f32)> {
-        if z > 0.0 && z.is_finite() {
+        if crate::geometry::is_valid_depth(z) {
             Some((self.tx / z + self.cx, self.ty / z + self.cy))
         } else {
             None

@@ -163,7 +163,7 @@ fn min_valid_depth(depth: ArrayView2<f32>, y: usize, x: usize, r: usize) -> f32 
     for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
         for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
             let d = depth[[yy, xx]];
-            if d > 0.0 && d.is_finite() {
+            if crate::geometry::is_valid_depth(d) {
                 best = best.min(d);
             }
         }

@@ -32,3 +32,4 @@ pub mod online;
 
 pub use calibration::Calibration;
 pub use frame::{Flow, RgbdFrame};
+pub use geometry::is_valid_depth;

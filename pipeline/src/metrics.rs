@@ -76,7 +76,7 @@ impl DepthErrorSplit {
         let mut pixels: Vec<(f32, f32)> = Vec::new(); // (input error, output value - gt)
         Zip::from(input).and(output).and(gt).for_each(|&i, &o, &g| {
             if g > 0.0 && g <= max_depth && i > 0.0 && i.is_finite() {
-                let out_err = if o > 0.0 && o.is_finite() {
+                let out_err = if crate::geometry::is_valid_depth(o) {
                     o - g
                 } else {
                     f32::NAN

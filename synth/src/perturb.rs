@@ -61,7 +61,7 @@ pub fn median_valid(depth: &ndarray::Array2<f32>) -> Option<f64> {
     let mut v: Vec<f32> = depth
         .iter()
         .copied()
-        .filter(|&z| z > 0.0 && z.is_finite())
+        .filter(|&z| dear_pipeline::is_valid_depth(z))
         .collect();
     if v.is_empty() {
         return None;

@@ -61,7 +61,7 @@ pub fn panel(frame: &RgbdFrame, error_range_m: f32, scale: f64) -> RgbImage {
         .gt_depth
         .clone()
         .unwrap_or_else(|| frame.depth.clone());
-    let valid = |z: f32| z > 0.0 && z.is_finite();
+    let valid = dear_pipeline::is_valid_depth;
     let lo = quantile(&gt, 0.01, valid).unwrap_or(0.0);
     let hi = quantile(&gt, 0.99, valid).unwrap_or(1.0).max(lo + 1e-3);
     let depth_colour = |z: f32| {

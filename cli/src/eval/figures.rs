@@ -65,7 +65,7 @@ fn amplitude_image(amplitude: ArrayView2<f32>) -> RgbImage {
 /// `|result − gt|` where both are valid, else 0 (drawn black).
 pub fn error_map(result: ArrayView2<f32>, gt: ArrayView2<f32>) -> Array2<f32> {
     ndarray::Zip::from(result).and(gt).map_collect(|&r, &g| {
-        if r > 0.0 && g > 0.0 && r.is_finite() && g.is_finite() {
+        if dear_pipeline::is_valid_depth(r) && dear_pipeline::is_valid_depth(g) {
             // Exactly zero error would read as invalid (black); keep it visible.
             (r - g).abs().max(1e-4)
         } else {
@@ -136,7 +136,7 @@ pub fn scanline_plot(frame: &RgbdFrame, result: ArrayView2<f32>, row: usize) -> 
     let valid = curves
         .iter()
         .flat_map(|(c, _)| c.iter().copied())
-        .filter(|z| *z > 0.0 && z.is_finite());
+        .filter(|z| dear_pipeline::is_valid_depth(*z));
     let (lo, hi) = valid.fold((f32::INFINITY, 0.0f32), |(lo, hi), z| {
         (lo.min(z), hi.max(z))
     });
@@ -160,7 +160,7 @@ pub fn scanline_plot(frame: &RgbdFrame, result: ArrayView2<f32>, row: usize) -> 
     for (curve, colour) in curves {
         let mut last: Option<(i64, i64)> = None;
         for (c, &z) in curve.iter().enumerate() {
-            if !(z > 0.0 && z.is_finite()) {
+            if !dear_pipeline::is_valid_depth(z) {
                 last = None;
                 continue;
             }

@@ -230,7 +230,7 @@ pub fn write_mask(path: &Path, mask: ArrayView2<bool>) -> Result<(), CaptureErro
 /// negative or non-finite depth → 0).
 pub fn depth_to_u16(depth: ArrayView2<f32>, scale: f32) -> Array2<u16> {
     depth.mapv(|z| {
-        if z > 0.0 && z.is_finite() {
+        if crate::geometry::is_valid_depth(z) {
             (z / scale).round().clamp(0.0, 65535.0) as u16
         } else {
             0

@@ -34,7 +34,7 @@ pub fn ground_truth_mask(frame: &RgbdFrame) -> Result<Array2<bool>, EvalError> {
         .gt_depth
         .as_ref()
         .ok_or(EvalError::NoGroundTruth { frame: frame.index })?;
-    let mut valid = gt.mapv(|z| z > 0.0 && z.is_finite());
+    let mut valid = gt.mapv(crate::geometry::is_valid_depth);
     if let Some(mask) = &frame.mask {
         Zip::from(&mut valid).and(mask).for_each(|v, &m| *v &= m);
     }

@@ -29,4 +29,5 @@ pub use lsq::{
 pub use splat::{
     splat_depth_into, splat_depth_with, synthesize_view, SplatScratch, SynthesizedView,
 };
+pub use surface::is_valid_depth;
 pub use warp::{warp_bilinear, warp_depth, warp_rgb};

@@ -224,8 +224,8 @@ pub fn blend_classical(
                     .zip(c_row.iter())
                     .zip(full.iter())
                 {
-                    let d_ok = d > 0.0 && d.is_finite();
-                    let c_ok = c > 0.0 && c.is_finite();
+                    let d_ok = crate::geometry::is_valid_depth(d);
+                    let c_ok = crate::geometry::is_valid_depth(c);
                     *o = match (d_ok, c_ok) {
                         (true, true) => {
                             let t = sigmoid(logit + jump * (c - d).abs());
