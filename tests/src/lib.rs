@@ -6,15 +6,9 @@ pub mod engines;
 pub mod processes;
 pub mod scene;
 
-use sha2::{Digest, Sha256};
-
-/// Hex SHA-256 of bytes (what the probe prints for each frame's payload).
-pub fn sha256_hex(bytes: &[u8]) -> String {
-    Sha256::digest(bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect()
-}
+/// Hex SHA-256 of bytes (what the probe prints for each frame's payload): the bundle
+/// format's digest.
+pub use dear_pipeline::model::hex_sha256 as sha256_hex;
 
 use std::collections::BTreeMap;
 

@@ -129,8 +129,9 @@ impl ModelBundle {
     }
 }
 
-/// Lower-case hex SHA-256 of `bytes`.
-pub(crate) fn hex_sha256(bytes: &[u8]) -> String {
+/// Lower-case hex SHA-256 of `bytes`: how `model.json` writes a graph's digest (and how the
+/// end-to-end tests fingerprint payloads).
+pub fn hex_sha256(bytes: &[u8]) -> String {
     Sha256::digest(bytes)
         .iter()
         .map(|b| format!("{b:02x}"))

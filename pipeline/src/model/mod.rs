@@ -17,7 +17,7 @@ pub mod kernel_apply;
 pub mod manifest;
 pub mod runner;
 
-pub use bundle::ModelBundle;
+pub use bundle::{hex_sha256, ModelBundle};
 pub use error::BundleError;
 pub use manifest::{GraphRole, Manifest, Normalisation, RefineApply};
 pub use runner::{BundleRunner, RunnerOptions};
