@@ -18,7 +18,7 @@ use ndarray::{ArrayView2, ArrayView3};
 pub const DEPTH_PNG_SCALE: f32 = 0.001;
 
 /// Colour of invalid depth (`0`, negative or non-finite) in every rendering.
-pub const INVALID_COLOR: Rgb<u8> = Rgb([0, 0, 0]);
+pub const INVALID_COLOR: Rgb<u8> = Rgb(dear_picture::INVALID);
 
 /// Colour of the depth-discontinuity lines of [`blend_rgb_depth`]: magenta occurs neither in
 /// the turbo map nor often in natural scenes, so the lines stay visible over both.
@@ -88,21 +88,10 @@ fn effective_range(depth: ArrayView2<f32>, range: Option<(f32, f32)>) -> (f32, f
     }
 }
 
-/// The colour of depth `z` in `[near, far]` (clamped) on the turbo map: near is blue, far is
-/// red. Turbo rather than viridis because its larger lightness and hue range separates nearby
-/// depths better, while, unlike jet, it has no false bands.
+/// The colour of depth `z` in `[near, far]` (clamped) on the shared depth map (turbo: near is
+/// blue, far is red; `dear_picture`).
 fn turbo(z: f32, near: f32, far: f32) -> Rgb<u8> {
-    turbo_at(((z - near) / (far - near)).clamp(0.0, 1.0))
-}
-
-/// Where the used part of turbo starts: its darkest tenth is almost black and would read as
-/// invalid depth, so near depth starts at a clearly blue-violet.
-const TURBO_START: f64 = 0.1;
-
-/// The colour for `t` in `[0, 1]` (near → far).
-fn turbo_at(t: f32) -> Rgb<u8> {
-    let c = colorous::TURBO.eval_continuous(TURBO_START + (1.0 - TURBO_START) * f64::from(t));
-    Rgb([c.r, c.g, c.b])
+    Rgb(dear_picture::depth_color(z, near, far))
 }
 
 /// Depth coloured with turbo, same size as `depth`, invalid pixels black. No legend; see

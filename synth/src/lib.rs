@@ -15,7 +15,7 @@
 //! - [`family`]: training and held-out families of sensor and scene settings (`family`);
 //! - [`perturb`]: misaligned test/training sets with ground-truth flow;
 //! - [`sequence`]: moving scenes with drifting calibration;
-//! - [`preview`]: colour maps and the preview panel.
+//! - [`preview`]: the preview panel (colour maps from `dear-picture`).
 
 pub mod classical;
 pub mod dataset;

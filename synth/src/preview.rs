@@ -1,40 +1,16 @@
 //! The preview panel (`dear-synth preview`): RGB | amplitude | ToF depth | ground truth | error.
 //!
-//! ToF depth and ground truth share one colour scale (turbo, from the 1st to the 99th
+//! ToF depth and ground truth share one colour scale (`dear_picture`'s depth map, the same as
+//! the SDK's previews and `dear eval`'s figures; from the 1st to the 99th
 //! percentile of the valid ground truth), so equal colours mean equal depths; invalid pixels are
 //! black. The error map is ToF − ground truth on the same pixel, blue (too near) – white – red
 //! (too far), saturating at ±`error_range_m`; on a misaligned frame it shows the misalignment
 //! as well as the ToF errors. Amplitude is shown as `√(a / a₉₉)` (grey).
 
+use dear_picture::{depth_turbo, diverging, INVALID};
 use dear_pipeline::RgbdFrame;
 use image::{imageops, RgbImage};
 use ndarray::Array2;
-
-/// Turbo colour map (Mikhailov 2019, polynomial approximation), `t ∈ [0, 1]`.
-pub fn turbo(t: f64) -> [u8; 3] {
-    let t = t.clamp(0.0, 1.0);
-    let r = 0.13572138
-        + t * (4.61539260
-            + t * (-42.66032258 + t * (132.13108234 + t * (-152.94239396 + t * 59.28637943))));
-    let g = 0.09140261
-        + t * (2.19418839
-            + t * (4.84296658 + t * (-14.18503333 + t * (4.27729857 + t * 2.82956604))));
-    let b = 0.10667330
-        + t * (12.64194608
-            + t * (-60.58204836 + t * (110.36276771 + t * (-89.90310912 + t * 27.34824973))));
-    [r, g, b].map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)
-}
-
-/// Diverging blue–white–red for `t ∈ [−1, 1]`.
-pub fn diverging(t: f64) -> [u8; 3] {
-    let t = t.clamp(-1.0, 1.0);
-    let (r, g, b) = if t < 0.0 {
-        (1.0 + t, 1.0 + t * 0.6, 1.0)
-    } else {
-        (1.0, 1.0 - t * 0.8, 1.0 - t)
-    };
-    [r, g, b].map(|v: f64| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8)
-}
 
 /// The `q`-quantile of the values passing `keep`.
 fn quantile(a: &Array2<f32>, q: f64, keep: impl Fn(f32) -> bool) -> Option<f32> {
@@ -66,9 +42,9 @@ pub fn panel(frame: &RgbdFrame, error_range_m: f32, scale: f64) -> RgbImage {
     let hi = quantile(&gt, 0.99, valid).unwrap_or(1.0).max(lo + 1e-3);
     let depth_colour = |z: f32| {
         if valid(z) {
-            turbo(((z - lo) / (hi - lo)) as f64)
+            depth_turbo(((z - lo) / (hi - lo)) as f64)
         } else {
-            [0, 0, 0]
+            INVALID
         }
     };
     let a99 = quantile(&frame.amplitude, 0.99, |a| a > 0.0)
@@ -113,19 +89,4 @@ pub fn panel(frame: &RgbdFrame, error_range_m: f32, scale: f64) -> RgbImage {
         imageops::replace(&mut out, &img, (i as u32 * (pw + gap)) as i64, 0);
     }
     out
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn colour_maps_span_their_range() {
-        assert_eq!(diverging(0.0), [255, 255, 255]);
-        assert!(diverging(1.0)[2] == 0 && diverging(-1.0)[0] == 0);
-        // Dark at both ends, blue low, red high.
-        let (a, b) = (turbo(0.1), turbo(0.9));
-        assert!(a[2] > 200 && a[0] < 100 && b[0] > 150 && b[2] < 20);
-        assert!(turbo(0.0).iter().all(|&c| c < 40));
-    }
 }
