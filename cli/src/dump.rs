@@ -25,7 +25,7 @@ use dear_pipeline::frame::RgbdFrame;
 use serde_json::{json, Value};
 
 use super::stats::flag_names;
-use super::{next_frame, parse_intrinsics, Interrupted, StopFlag};
+use super::{first_frame, next_frame, parse_intrinsics, Interrupted, StopFlag};
 
 /// What `source.amplitude` says, and the `--help` text repeats.
 const AMPLITUDE_NOTE: &str = "confidence×257 (deard publishes no amplitude)";
@@ -77,22 +77,7 @@ pub fn run(args: &DumpArgs) -> anyhow::Result<()> {
     let client = Client::connect(&args.service)?;
     let timeout = Duration::from_secs_f64(args.timeout_s);
 
-    let Some(first) = next_frame(&client, timeout, None, &stop)? else {
-        if stop.is_set() {
-            return Err(Interrupted(format!(
-                "interrupted before any frame arrived from {:?}; nothing written",
-                args.service
-            ))
-            .into());
-        }
-        bail!(
-            "no frame arrived from service {:?} within {} s; nothing written to {} \
-             (is deard running and publishing there? `dear list` shows the frame services)",
-            args.service,
-            args.timeout_s,
-            args.out.display()
-        );
-    };
+    let first = first_frame(&client, &args.service, args.timeout_s, &args.out, &stop)?;
     let mut dump = Dump::create(args, &first)?;
     let progress = indicatif::ProgressBar::new(args.count);
     dump.add(first)?;

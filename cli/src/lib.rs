@@ -149,6 +149,32 @@ pub fn next_frame(
     }
 }
 
+/// Waits for the first frame of a command that writes `out` (`dump`, `record`). When none comes,
+/// the error says whether Ctrl-C or the timeout ended the wait, and that nothing was written.
+pub fn first_frame(
+    client: &dear_client::Client,
+    service: &str,
+    timeout_s: f64,
+    out: &std::path::Path,
+    stop: &StopFlag,
+) -> anyhow::Result<dear_client::Frame> {
+    let timeout = std::time::Duration::from_secs_f64(timeout_s);
+    if let Some(frame) = next_frame(client, timeout, None, stop)? {
+        return Ok(frame);
+    }
+    if stop.is_set() {
+        return Err(Interrupted(format!(
+            "interrupted before any frame arrived from {service:?}; nothing written"
+        ))
+        .into());
+    }
+    anyhow::bail!(
+        "no frame arrived from service {service:?} within {timeout_s} s; nothing written to {} \
+         (is deard running and publishing there? `dear list` shows the frame services)",
+        out.display()
+    )
+}
+
 /// `FX,FY,CX,CY`: the RGB camera's pinhole intrinsics given on the command line (`dump`,
 /// `record`; clap value parser).
 pub fn parse_intrinsics(s: &str) -> Result<dear_pipeline::capture::Intrinsics, String> {

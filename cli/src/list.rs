@@ -31,20 +31,10 @@ pub fn frame_services() -> anyhow::Result<Vec<FrameServiceInfo>> {
     let mut found = Vec::new();
     // The daemon's iceoryx2 root: $DEAR_IOX2_ROOT, else /dev/shm/dear (node_config).
     let config = dear_proto::node_config()?;
-    // No root directory: no daemon (or client) has run under it since boot. One this user
-    // cannot enter (outside the service's group) is an error that says so, not "none found".
-    let root = dear_proto::transport::root_dir(&config);
-    match std::fs::metadata(&root) {
-        Ok(_) => {}
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(found),
-        Err(source) if source.kind() == std::io::ErrorKind::PermissionDenied => {
-            return Err(
-                dear_proto::transport::RootError::NotReachable { path: root, source }.into(),
-            )
-        }
-        Err(e) => {
-            return Err(anyhow::anyhow!(e).context(format!("cannot inspect {}", root.display())))
-        }
+    // No root directory: nothing to list. One this user cannot enter (outside the service's
+    // group) is an error that says so, not "none found".
+    if dear_proto::transport::existing_root(&config)?.is_none() {
+        return Ok(found);
     }
     Transport::list(&config, |details| {
         if let Pattern::PublishSubscribe(pubsub) = details.static_details.messaging_pattern() {

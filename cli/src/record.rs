@@ -43,7 +43,7 @@ use dear_client::{Client, Frame};
 use dear_pipeline::capture::Intrinsics;
 
 use self::mcap_file::{DepthEncoding, FrameData, RecordSummary, Recorder};
-use super::{next_frame, parse_intrinsics, Interrupted, StopFlag};
+use super::{first_frame, next_frame, parse_intrinsics, Interrupted, StopFlag};
 
 /// Arguments of `dear record` (the command's help text is on [`super::Command::Record`]).
 #[derive(Debug, Args)]
@@ -113,26 +113,8 @@ pub fn run(args: &RecordArgs) -> anyhow::Result<()> {
             return Err(e.into());
         }
     };
-    let timeout = Duration::from_secs_f64(args.timeout_s);
-    let first = match next_frame(&client, timeout, None, &stop) {
-        Ok(Some(frame)) => frame,
-        Ok(None) => {
-            remove_unused(&args.mcap);
-            if stop.is_set() {
-                return Err(Interrupted(format!(
-                    "interrupted before any frame arrived from {:?}; nothing written",
-                    args.service
-                ))
-                .into());
-            }
-            bail!(
-                "no frame arrived from service {:?} within {} s; nothing written to {} \
-                 (is deard running and publishing there? `dear list` shows the frame services)",
-                args.service,
-                args.timeout_s,
-                args.mcap.display()
-            );
-        }
+    let first = match first_frame(&client, &args.service, args.timeout_s, &args.mcap, &stop) {
+        Ok(frame) => frame,
         Err(e) => {
             remove_unused(&args.mcap);
             return Err(e);

@@ -192,20 +192,30 @@ pub enum RootError {
     },
 }
 
+/// The root directory when it exists, `None` when it does not (no daemon or client has run
+/// under it since boot). One this user cannot reach (outside the service's group) is
+/// [`RootError::NotReachable`], not "missing".
+pub fn existing_root(config: &Config) -> Result<Option<std::path::PathBuf>, RootError> {
+    let path = root_dir(config);
+    match std::fs::metadata(&path) {
+        Ok(_) => Ok(Some(path)),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(source) if source.kind() == std::io::ErrorKind::PermissionDenied => {
+            Err(RootError::NotReachable { path, source })
+        }
+        Err(source) => Err(RootError::Inspect { path, source }),
+    }
+}
+
 /// Creates the root directory with missing parents when it does not exist, mode `0770` (so
 /// the creator's group may connect; iceoryx2 itself would make it `0777`, open to every
 /// user). Clients call it too, so one started before the daemon does not open the root up.
 pub fn create_root(config: &Config) -> Result<std::path::PathBuf, RootError> {
     use std::os::unix::fs::PermissionsExt;
-    let path = root_dir(config);
-    match std::fs::metadata(&path) {
-        Ok(_) => return Ok(path),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(source) if source.kind() == std::io::ErrorKind::PermissionDenied => {
-            return Err(RootError::NotReachable { path, source })
-        }
-        Err(source) => return Err(RootError::Inspect { path, source }),
+    if let Some(path) = existing_root(config)? {
+        return Ok(path);
     }
+    let path = root_dir(config);
     let created = std::fs::create_dir_all(&path)
         // Explicitly: the process's umask (the unit's 0027) would take the group's write.
         .and_then(|()| std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o770)));
