@@ -6,6 +6,10 @@
 #   scripts/setup.sh              everything (what scripts/test.sh needs)
 #   scripts/setup.sh --rust-only  only what building the Rust workspace needs (scripts/demo.sh):
 #                                 no Python packages, no PyTorch
+#   scripts/setup.sh --aarch64    the Rust workspace, plus cross-building for 64-bit ARM boards
+#                                 and packaging (scripts/test-aarch64.sh, scripts/test-deb.sh):
+#                                 the Rust target aarch64-unknown-linux-gnu, Debian's cross gcc
+#                                 and arm64 C library, qemu-user, dpkg-dev and cargo-deb
 #
 # PyTorch: the CPU build (download.pytorch.org/whl/cpu, about 0.2 GB) unless DEAR_TORCH=cuda,
 # which takes PyPI's default wheel with its CUDA libraries (about 6.8 GB). When the CPU index
@@ -14,11 +18,15 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 rust_only=false
+aarch64=true
 case "${1:-}" in
     "") ;;
-    --rust-only) rust_only=true ;;
-    *) echo "setup: unknown option $1 (expected --rust-only or nothing)" >&2; exit 2 ;;
+    --rust-only) rust_only=true; aarch64=false ;;
+    --aarch64) rust_only=true ;;
+    *) echo "setup: unknown option $1 (expected --rust-only, --aarch64 or nothing)" >&2; exit 2 ;;
 esac
+# The cargo-deb release the packaging was written against (cargo install --locked builds it).
+cargo_deb_version=3.8.0
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 
@@ -38,6 +46,10 @@ packages=(build-essential pkg-config)
 # calls against the unit's filter) and the system python3's numpy (it runs a Python app as
 # another user, who cannot reach the checkout's .venv).
 $rust_only || packages+=(python3-venv strace python3-numpy)
+# Cross-building for aarch64 (linker, the target's C library and headers for -sys crates),
+# running its binaries here (qemu-user: qemu-aarch64 -L /usr/aarch64-linux-gnu), and building
+# .deb packages (dpkg-dev: dpkg-shlibdeps for their dependencies; binutils for strip).
+$aarch64 && packages+=(gcc-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user dpkg-dev)
 missing=()
 for pkg in "${packages[@]}"; do
     dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
@@ -46,6 +58,17 @@ if [ ${#missing[@]} -gt 0 ] && command -v apt-get >/dev/null; then
     echo "setup: installing ${missing[*]}"
     as_root apt-get update -qq
     as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}"
+fi
+
+if $aarch64; then
+    if ! rustup target list --installed | grep -qx aarch64-unknown-linux-gnu; then
+        echo "setup: adding the Rust target aarch64-unknown-linux-gnu"
+        rustup target add aarch64-unknown-linux-gnu
+    fi
+    if ! cargo deb --version 2>/dev/null | grep -q '^cargo-deb 3\.'; then
+        echo "setup: installing cargo-deb $cargo_deb_version (cargo install, about a minute)"
+        cargo install cargo-deb --locked --version "$cargo_deb_version" --quiet
+    fi
 fi
 
 # Python environment for train/ (re-installed only when train/pyproject.toml changes).
