@@ -40,8 +40,10 @@ for component in rustfmt clippy; do
     fi
 done
 
-# System packages: a C toolchain for -sys crates, pkg-config, and (for train/) Python's venv.
-packages=(build-essential pkg-config)
+# System packages: a C toolchain for -sys crates, pkg-config, libclang (the `v4l` crate's build
+# generates its V4L2 bindings with bindgen; the kernel headers come with the C toolchain), and
+# (for train/) Python's venv.
+packages=(build-essential pkg-config libclang1)
 # train/'s venv; strace for the install test (scripts/install_test.sh traces the daemon's system
 # calls against the unit's filter) and the system python3's numpy (it runs a Python app as
 # another user, who cannot reach the checkout's .venv).

@@ -18,6 +18,14 @@
 #   --self-test       boots, lists vivid's nodes and formats, streams frames from its capture
 #                     node and checks the output -> capture loop byte for byte
 #                     (scripts/v4l2-vm/self-test.sh with scripts/v4l2-vm/capture_check.c)
+#   --deard           the daemon end to end (scripts/v4l2-vm/deard-live.sh): two vivid
+#                     instances; known 'Y16 ' depth frames (millimetres) are fed into the first
+#                     one's output and looped into its capture node (the ToF node), the second's
+#                     capture node is the RGB node (YUYV); deard (target/release, built first:
+#                     cargo build --release -p deard -p dear-cli -p dear-e2e-tests) captures
+#                     both with refine = "none" and a zero calibration, and dear-v4l-check must
+#                     receive exactly the fed depths; then vivid is unbound and bound again
+#                     (the nodes vanish and return) and frames must flow again
 #
 # Environment: DEAR_VM_CACHE (default ~/.cache/dear/v4l2-vm: the kernel .deb and the prepared
 # kernel + decompressed modules, per kernel version), DEAR_VM_KERNEL (a Debian kernel ABI, e.g.
@@ -89,6 +97,7 @@ now() { date +%s.%N; }
 since() { awk -v a="$1" -v b="$(now)" 'BEGIN { printf "%.1f", b - a }'; }
 
 bins=() files=() run_script="" vivid_params="" vm_timeout=600 self_test=false prepare_only=false
+deard=false
 strip=true
 while [ $# -gt 0 ]; do
     case "$1" in
@@ -98,15 +107,18 @@ while [ $# -gt 0 ]; do
         --vivid-params) [ $# -ge 2 ] || die "--vivid-params needs a value"; vivid_params=$2; shift 2 ;;
         --timeout) [ $# -ge 2 ] || die "--timeout needs seconds"; vm_timeout=$2; shift 2 ;;
         --self-test) self_test=true; shift ;;
+        --deard) deard=true; shift ;;
         --no-strip) strip=false; shift ;;
         --prepare) prepare_only=true; shift ;;
         -h | --help) sed -n '2,/^set -euo/p' "$0" | sed -e '$d' -e 's/^# \{0,1\}//'; exit 0 ;;
         *) die "unknown argument '$1' (see --help)" ;;
     esac
 done
-if ! $self_test && ! $prepare_only; then
-    [ -n "$run_script" ] || die "nothing to run: give --run SCRIPT or --self-test (see --help)"
+if ! $self_test && ! $deard && ! $prepare_only; then
+    [ -n "$run_script" ] || die "nothing to run: give --run SCRIPT, --self-test or --deard (see --help)"
 fi
+# --deard: two vivid instances, each a capture and an output node (video0..3).
+if $deard && [ -z "$vivid_params" ]; then vivid_params='n_devs=2 node_types=0x101,0x101'; fi
 [ -z "$run_script" ] || [ -f "$run_script" ] || die "--run: no file $run_script"
 for b in "${bins[@]+"${bins[@]}"}"; do [ -f "$b" ] || die "--bin: no file $b"; done
 for f in "${files[@]+"${files[@]}"}"; do
@@ -131,7 +143,7 @@ static_busybox >/dev/null || need+=(busybox-static)
 command -v depmod >/dev/null && command -v modprobe >/dev/null || need+=(kmod)
 command -v cpio >/dev/null || need+=(cpio)
 command -v xz >/dev/null || need+=(xz-utils)
-if $self_test && ! command -v gcc >/dev/null; then need+=(build-essential); fi
+if { $self_test || $deard; } && ! command -v gcc >/dev/null; then need+=(build-essential); fi
 if [ ${#need[@]} -gt 0 ]; then
     command -v apt-get >/dev/null || die "missing ${need[*]} and no apt-get to install them"
     echo "test-v4l2-vm: installing ${need[*]}"
@@ -248,11 +260,24 @@ add_libs() { # the libraries (and loader) ldd lists for $1, at their own paths
         fi
     done
 }
-if $self_test; then
+if $self_test || $deard; then
     nice gcc -O2 -Wall -static -o "$work/capture_check" "$vm_dir/capture_check.c" \
         || die "gcc could not build scripts/v4l2-vm/capture_check.c (static: needs libc6-dev)"
     bins+=("$work/capture_check")
+fi
+if $self_test; then
     [ -n "$run_script" ] || run_script=$vm_dir/self-test.sh
+fi
+if $deard; then
+    release=$(cd "$vm_dir/../.." && pwd)/target/release
+    for b in deard dear dear-v4l-check; do
+        [ -x "$release/$b" ] || die "--deard needs $release/$b: cargo build --release -p deard -p dear-cli -p dear-e2e-tests"
+        bins+=("$release/$b")
+    done
+    python3 "$vm_dir/fed_frames.py" 640 480 4 > "$work/fed.y16"
+    files+=("$work/fed.y16:/root/fed.y16" "$vm_dir/module.toml:/root/module.toml"
+            "$vm_dir/deard.toml:/root/deard.toml")
+    [ -n "$run_script" ] || run_script=$vm_dir/deard-live.sh
 fi
 for b in "${bins[@]+"${bins[@]}"}"; do
     cp -L "$b" "$root/bin/${b##*/}"

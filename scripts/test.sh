@@ -39,3 +39,19 @@ if [ "$(id -u)" = 0 ]; then
 else
     echo "== install recipe and unit: skipped (needs root; run sudo scripts/install_test.sh)"
 fi
+
+# The live-capture tier (issue 14): the kernel's own V4L2 — vivid in a qemu VM (TCG, no KVM;
+# the kernel package is cached under ~/.cache/dear/v4l2-vm) — first the driver alone, then
+# deard capturing two vivid nodes with a client checking the depth it receives, through a
+# device loss. About a minute warm, plus the release build of the three binaries.
+echo "== V4L2 in a VM (scripts/test-v4l2-vm.sh --self-test, --deard)"
+cargo build --release --quiet -p deard -p dear-cli -p dear-e2e-tests \
+    --bin deard --bin dear --bin dear-v4l-check
+for mode in self-test deard; do
+    if ! scripts/test-v4l2-vm.sh "--$mode" > "target/v4l2-vm-$mode.log" 2>&1; then
+        tail -n 80 "target/v4l2-vm-$mode.log"
+        echo "test-v4l2-vm.sh --$mode failed (whole console: target/v4l2-vm-$mode.log)" >&2
+        exit 1
+    fi
+    grep -E '^(ok|FAILED|self-test|deard-live|test-v4l2-vm):' "target/v4l2-vm-$mode.log" || true
+done

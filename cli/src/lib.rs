@@ -4,6 +4,7 @@
 //! Its own crate so that the SDK (`dear-client`) stays thin: applications linking the SDK do
 //! not pull clap, indicatif, the pipeline or tract, which `dear eval` needs.
 
+pub mod devices;
 pub mod dump;
 pub mod eval;
 pub mod list;
@@ -31,6 +32,9 @@ pub struct Cli {
 pub enum Command {
     /// List the DEAR frame services on this machine, with their publishers and subscribers.
     List,
+    /// List the V4L2 capture devices (/dev/video*): driver, formats with sizes and frame
+    /// rates, controls — what `[capture.v4l]` in deard's configuration can ask for.
+    Devices,
     /// Print live statistics of a frame service once a second: rate, latency, calibration.
     Watch(watch::WatchArgs),
     /// Write received frames as a capture directory (the format `deard` replays).
@@ -63,6 +67,7 @@ pub enum Command {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::List => list::run(),
+        Command::Devices => devices::run(),
         Command::Watch(args) => watch::run(&args),
         Command::Dump(args) => dump::run(&args),
         Command::Record(args) => record::run(&args),

@@ -110,7 +110,8 @@ pub enum Pacing {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CaptureConfig {
-    /// Source kind. Only `"replay"` (a capture directory) exists so far.
+    /// Source kind: `"replay"` (a capture directory, `path`) or `"v4l"` (a live module's
+    /// V4L2 nodes, `[capture.v4l]`).
     pub source: String,
     /// Capture directory to replay.
     pub path: PathBuf,
@@ -125,6 +126,69 @@ pub struct CaptureConfig {
     /// Frames waiting between capture and processing before the oldest is dropped
     /// (1..=[`MAX_QUEUE_DEPTH`]).
     pub queue_depth: usize,
+    /// With `source = "v4l"`: the module's ToF and RGB nodes and its calibration file.
+    pub v4l: Option<V4lConfig>,
+}
+
+/// A live ToF RGB-D module: two V4L2 capture nodes paired by timestamp, registered onto the RGB
+/// grid with the module's calibration file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct V4lConfig {
+    /// The module's calibration (TOML: both cameras' intrinsics, the ToF → RGB rotation and
+    /// translation, the depth scale; `daemon/module.example.toml` documents it).
+    pub calibration: PathBuf,
+    pub tof: TofNodeConfig,
+    pub rgb: NodeConfig,
+    /// Largest timestamp difference of a ToF and an RGB frame that are paired, milliseconds;
+    /// none = half the slower node's frame period.
+    pub pair_tolerance_ms: Option<f64>,
+}
+
+/// One V4L2 capture node and the format to stream it in.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NodeConfig {
+    /// Device node, e.g. `/dev/video0` (or a stable `/dev/v4l/by-id/…` link).
+    pub device: PathBuf,
+    /// FourCC, four characters (`"YUYV"`, `"Z16 "` with its trailing space). `dear devices`
+    /// lists what each node offers.
+    pub format: String,
+    pub width: u32,
+    pub height: u32,
+    /// Frames per second to ask for; none = the node's current rate.
+    pub fps: Option<u32>,
+    /// V4L2 controls by name as `dear devices` prints them (`exposure_time_absolute = 100`).
+    #[serde(default)]
+    pub controls: std::collections::BTreeMap<String, i64>,
+}
+
+/// The ToF node: a depth format (`Z16 `, `Y16 `: depth units times the calibration's
+/// `depth_scale_m`) or raw 4-phase frames demodulated in the daemon (`Y12 `: four consecutive
+/// buffers; `Y12P`: the four phases stacked in one buffer of 4 × `height` rows).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TofNodeConfig {
+    #[serde(flatten)]
+    pub node: NodeConfig,
+    /// 4-phase formats: the modulation frequency, Hz (Arducam ToF: 75e6 for its 2 m range,
+    /// 37.5e6 for 4 m).
+    pub modulation_hz: Option<f64>,
+    /// 4-phase formats: `"standard"` (Q = D1 − D3) or `"inverted"` (Q = D3 − D1, Arducam).
+    #[serde(default)]
+    pub q_sign: QSignConfig,
+    /// 4-phase formats: amplitude (raw units) below which a pixel's depth is invalid.
+    #[serde(default)]
+    pub min_amplitude: f32,
+}
+
+/// Sign of the quadrature term of a 4-phase module.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum QSignConfig {
+    #[default]
+    Standard,
+    Inverted,
 }
 
 impl Default for CaptureConfig {
@@ -137,6 +201,7 @@ impl Default for CaptureConfig {
             start: 0,
             end: None,
             queue_depth: 2,
+            v4l: None,
         }
     }
 }
@@ -312,11 +377,21 @@ impl Config {
                 "[service] max_shared_memory_mb = {shm} must be within 1..={MAX_SHARED_MEMORY_MB}"
             ));
         }
-        if self.capture.source != "replay" {
-            return Err(format!(
-                "[capture] source = {:?}: supported sources: \"replay\"",
-                self.capture.source
-            ));
+        match (self.capture.source.as_str(), &self.capture.v4l) {
+            ("replay", _) => {}
+            ("v4l", Some(v4l)) => check_v4l(v4l)?,
+            ("v4l", None) => {
+                return Err(
+                    "[capture] source = \"v4l\" needs a [capture.v4l] table (calibration, \
+                     [capture.v4l.tof], [capture.v4l.rgb]; see daemon/deard.example.toml)"
+                        .into(),
+                )
+            }
+            (other, _) => {
+                return Err(format!(
+                    "[capture] source = {other:?}: supported sources: \"replay\", \"v4l\""
+                ))
+            }
         }
         let depth = self.capture.queue_depth;
         if !(1..=MAX_QUEUE_DEPTH).contains(&depth) {
@@ -389,6 +464,97 @@ impl Config {
         dear_proto::validate_service_name(&self.service.service_name())
             .map_err(|e| format!("[service] {key}: {e}"))
     }
+}
+
+/// The node tables of `[capture.v4l]`: four-character formats the daemon decodes for each
+/// role, sizes within the capture limits, 4-phase parameters where the format needs them.
+fn check_v4l(v4l: &V4lConfig) -> Result<(), String> {
+    use dear_v4l2::pixel::PixelFormat as P;
+    let roles: [(&str, &NodeConfig, &[P]); 2] = [
+        ("tof", &v4l.tof.node, &[P::Z16, P::Y16, P::Y12, P::Y12P]),
+        ("rgb", &v4l.rgb, &[P::Yuyv, P::Nv12, P::Rgb3, P::Mjpg]),
+    ];
+    for (role, node, allowed) in roles {
+        let key = format!("[capture.v4l.{role}]");
+        let format = node_format(node).map_err(|e| format!("{key} {e}"))?;
+        if !allowed.contains(&format) {
+            let names: Vec<String> = allowed
+                .iter()
+                .map(|f| format!("{:?}", f.to_string()))
+                .collect();
+            return Err(format!(
+                "{key} format = {:?} is not a {role} format the daemon decodes: {}",
+                node.format,
+                names.join(", ")
+            ));
+        }
+        let max = dear_pipeline::capture::manifest::MAX_SIDE;
+        if !(1..=max).contains(&node.width) || !(1..=max).contains(&node.height) {
+            return Err(format!(
+                "{key} width = {}, height = {} must be within 1..={max}",
+                node.width, node.height
+            ));
+        }
+        if node.fps == Some(0) {
+            return Err(format!(
+                "{key} fps = 0: leave it out to keep the node's rate"
+            ));
+        }
+    }
+    let tof = &v4l.tof;
+    if matches!(node_format(&tof.node), Ok(P::Y12 | P::Y12P)) {
+        match tof.modulation_hz {
+            Some(f) if f.is_finite() && f > 0.0 => {}
+            Some(f) => {
+                return Err(format!(
+                    "[capture.v4l.tof] modulation_hz = {f} must be a positive frequency"
+                ))
+            }
+            None => {
+                return Err(format!(
+                    "[capture.v4l.tof] format = {:?} is raw 4-phase data: modulation_hz is needed to turn phase into distance",
+                    tof.node.format
+                ))
+            }
+        }
+        if tof.node.format == "Y12P" && !tof.node.height.is_multiple_of(4) {
+            return Err(format!(
+                "[capture.v4l.tof] height = {} must be 4 × the image height (four stacked phases)",
+                tof.node.height
+            ));
+        }
+    }
+    if !(tof.min_amplitude.is_finite() && tof.min_amplitude >= 0.0) {
+        return Err(format!(
+            "[capture.v4l.tof] min_amplitude = {} must be finite and ≥ 0",
+            tof.min_amplitude
+        ));
+    }
+    if let Some(ms) = v4l.pair_tolerance_ms {
+        if !(ms.is_finite() && ms > 0.0 && ms <= 1000.0) {
+            return Err(format!(
+                "[capture.v4l] pair_tolerance_ms = {ms} must be within (0, 1000]"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// A node's `format` as a pixel format (an error names a FourCC that is not four characters or
+/// not one the daemon knows).
+pub fn node_format(node: &NodeConfig) -> Result<dear_v4l2::pixel::PixelFormat, String> {
+    let bytes: [u8; 4] = node.format.as_bytes().try_into().map_err(|_| {
+        format!(
+            "format = {:?} must be a four-character code (pad with spaces: \"Z16 \")",
+            node.format
+        )
+    })?;
+    dear_v4l2::pixel::PixelFormat::from_fourcc(&bytes).ok_or_else(|| {
+        format!(
+            "format = {:?} is not a format the daemon decodes",
+            node.format
+        )
+    })
 }
 
 /// What a camera name may be.

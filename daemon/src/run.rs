@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use dear_proto::{FrameHeader, Stage};
 
 use crate::capture::replay::{ReplayOpenError, ReplaySource};
+use crate::capture::v4l::{V4lOpenError, V4lSource};
 use crate::capture::{FrameSource, SourceItem};
 use crate::config::{check_calibration_fits, Config, ConfigError, Pacing};
 use crate::processing::{EngineError, Processor};
@@ -26,6 +27,9 @@ pub enum RunError {
     /// The capture cannot be opened.
     #[error(transparent)]
     Source(#[from] ReplayOpenError),
+    /// The live module cannot be opened (its calibration file, a node, a format).
+    #[error(transparent)]
+    Live(#[from] V4lOpenError),
     /// The static calibration cannot align a stream of this size.
     #[error(transparent)]
     Calibration(ConfigError),
@@ -63,7 +67,10 @@ pub enum RunError {
 /// Returns the final statistics, or an error if it cannot start or the source fails (e.g. no
 /// frame of a replay can be read).
 pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError> {
-    let source = ReplaySource::open(&config.capture)?;
+    let source: Box<dyn FrameSource> = match &config.capture.v4l {
+        Some(v4l) if config.capture.source == "v4l" => Box::new(V4lSource::open(v4l)?),
+        _ => Box::new(ReplaySource::open(&config.capture)?),
+    };
     let (width, height) = source.size();
     let calibration = match config.pipeline.static_calibration {
         Some(calibration) => {
@@ -74,10 +81,15 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         None => {
             let calibration = source.initial_calibration();
             check_calibration_fits(
-                &format!(
-                    "{}: initial_calibration",
-                    config.capture.path.join("capture.json").display()
-                ),
+                &match &config.capture.v4l {
+                    Some(v4l) if config.capture.source == "v4l" => {
+                        format!("{}: initial calibration", v4l.calibration.display())
+                    }
+                    _ => format!(
+                        "{}: initial_calibration",
+                        config.capture.path.join("capture.json").display()
+                    ),
+                },
                 &calibration,
                 width,
                 height,
@@ -106,7 +118,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         Pacing::Fast => Overflow::Block,
     };
     let queue = Arc::new(FrameQueue::new(config.capture.queue_depth, overflow));
-    let capture = spawn_capture(Box::new(source), queue.clone(), shutdown.clone());
+    let capture = spawn_capture(source, queue.clone(), shutdown.clone());
 
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     let mut watchdog = Watchdog::from_env();

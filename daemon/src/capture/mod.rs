@@ -3,10 +3,12 @@
 //! nothing at all can be read ([`SourceItem::Failed`]). Every wait of a source gives way to the
 //! shutdown flag ([`sleep_unless`]).
 //!
-//! Back ends: [`replay`] (a capture directory). Live V4L2 capture will sit beside it behind the
-//! same trait.
+//! Back ends: [`replay`] (a capture directory) and [`v4l`] (a live module's V4L2 nodes, with
+//! its calibration file read by [`module`]).
 
+pub mod module;
 pub mod replay;
+pub mod v4l;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};

@@ -13,11 +13,14 @@
 //! - [`lsq`]: the paper's per-axis least squares for `(t, c)`, plain and robust (IRLS/Huber);
 //! - [`flow`]: depth → flow through a [`Calibration`](crate::Calibration);
 //! - [`splat`]: forward splatting with a z-buffer, to synthesise a perturbed RGB view;
+//! - [`register`]: a live ToF image onto the RGB grid with the module's factory rotation and
+//!   intrinsics (the translation is left to the chain's calibration);
 //! - [`fixtures`]: the shared test vectors.
 
 pub mod fixtures;
 pub mod flow;
 pub mod lsq;
+pub mod register;
 pub mod splat;
 pub mod surface;
 pub mod warp;

@@ -1,0 +1,85 @@
+#!/bin/sh
+# Guest script of `scripts/test-v4l2-vm.sh --deard` (busybox sh, vivid n_devs=2
+# node_types=0x101,0x101): deard captures a live "module" made of two vivid instances and a
+# client receives exactly the depth that was fed in; then the nodes vanish (vivid unbound)
+# and come back (bound again), and deard must report the loss, keep serving and resume.
+#
+# The ToF node is instance 0's capture node, fed known 'Y16 ' millimetre frames
+# (/root/fed.y16, scripts/v4l2-vm/fed_frames.py) through vivid's output -> capture loop by
+# capture_check; the RGB node is instance 1's capture node (YUYV webcam pattern).
+node() { # node NAME: the /dev node whose sysfs name is NAME (vivid-000-vid-cap)
+    for n in /sys/class/video4linux/*; do
+        [ "$(cat "$n/name")" = "$1" ] && { echo "/dev/${n##*/}"; return 0; }
+    done
+    return 1
+}
+nodes() {
+    tof=$(node vivid-000-vid-cap) && out=$(node vivid-000-vid-out) && rgb=$(node vivid-001-vid-cap)
+}
+wait_for() { # wait_for PATTERN FILE SECONDS
+    i=0
+    while ! grep -q "$1" "$2" 2>/dev/null; do
+        i=$((i + 1)); [ $i -gt $(($3 * 10)) ] && return 1; sleep 0.1
+    done
+}
+fail=0
+step() { echo "== $*"; }
+check() { # check DESCRIPTION COMMAND...: runs it, records a failure
+    d=$1; shift
+    if "$@"; then echo "ok: $d"; else echo "FAILED: $d"; fail=1; fi
+}
+nodes || { echo "deard-live: vivid nodes missing (n_devs=2 node_types=0x101,0x101?)"; exit 1; }
+sed -i "s|/dev/video0|$tof|; s|/dev/video2|$rgb|" /root/deard.toml
+echo "deard-live: ToF $tof (fed through $out), RGB $rgb"
+
+step "dear devices"
+dear devices > /tmp/devices.txt 2>&1; rc=$?
+cat /tmp/devices.txt
+check "dear devices exits 0" [ $rc = 0 ]
+check "dear devices lists the ToF node's 'Y16 ' as tof depth" grep -q "format \"Y16 \".*\[tof depth\]" /tmp/devices.txt
+check "dear devices lists the Loop Video control" grep -q "loop_video" /tmp/devices.txt
+
+step "feed $out -> $tof, start deard"
+capture_check feed "$out" "$tof" "Y16 " 640 480 /root/fed.y16 > /tmp/feed.log 2>&1 &
+feeder=$!
+sleep 2
+RUST_LOG=info deard --config /root/deard.toml --stats-interval 2 > /tmp/deard.log 2>&1 &
+daemon=$!
+if ! wait_for serving /tmp/deard.log 120; then
+    echo "FAILED: deard did not start serving"; cat /tmp/deard.log; exit 1
+fi
+grep starting /tmp/deard.log
+
+step "a client receives the fed depth"
+check "6 frames, each exactly one of the fed frames" \
+    dear-v4l-check --service dear/vm/frames --fed /root/fed.y16 --width 640 --height 480 \
+    --count 6 --timeout-s 180
+
+step "the nodes vanish: vivid unbound"
+kill $feeder 2>/dev/null; wait $feeder 2>/dev/null
+dev=$(ls /sys/bus/platform/drivers/vivid/ | grep vivid | head -n1)
+echo "$dev" > /sys/bus/platform/drivers/vivid/unbind
+check "deard reports the lost node" wait_for "capture node lost" /tmp/deard.log 30
+sleep 2
+check "deard keeps running without its nodes" kill -0 $daemon
+
+step "the nodes come back: vivid bound again"
+echo "$dev" > /sys/bus/platform/drivers/vivid/bind
+sleep 1
+nodes || { echo "FAILED: vivid nodes did not come back"; fail=1; }
+capture_check feed "$out" "$tof" "Y16 " 640 480 /root/fed.y16 >> /tmp/feed.log 2>&1 &
+feeder=$!
+check "deard reopens both nodes" wait_for "capture node is back" /tmp/deard.log 60
+check "the client receives the fed depth again" \
+    dear-v4l-check --service dear/vm/frames --fed /root/fed.y16 --width 640 --height 480 \
+    --count 4 --timeout-s 180
+
+step "stop"
+kill -TERM $daemon
+wait $daemon; rc=$?
+check "deard exits 0 on SIGTERM" [ $rc = 0 ]
+kill $feeder 2>/dev/null
+echo "---- deard log (last 40 lines)"
+tail -n 40 /tmp/deard.log
+echo "deard-live: $([ $fail = 0 ] && echo PASSED || echo FAILED)"
+exit $fail
