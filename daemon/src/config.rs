@@ -128,6 +128,9 @@ pub struct CaptureConfig {
     pub queue_depth: usize,
     /// With `source = "v4l"`: the module's ToF and RGB nodes and its calibration file.
     pub v4l: Option<V4lConfig>,
+    /// Write the source's frames to this new (or empty) directory as a capture directory while
+    /// serving (`deard --record`); `deard --replay` processes them again bit for bit.
+    pub record: Option<PathBuf>,
 }
 
 /// A live ToF RGB-D module: two V4L2 capture nodes paired by timestamp, registered onto the RGB
@@ -202,6 +205,7 @@ impl Default for CaptureConfig {
             end: None,
             queue_depth: 2,
             v4l: None,
+            record: None,
         }
     }
 }

@@ -12,6 +12,7 @@ pub mod iceoryx_log;
 pub mod processing;
 pub mod publish;
 pub mod queue;
+pub mod record;
 pub mod run;
 pub mod shared_memory;
 pub mod stats;

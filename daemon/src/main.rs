@@ -21,9 +21,14 @@ struct Cli {
     /// TOML configuration file (see daemon/deard.example.toml); flags below override it.
     #[arg(short, long)]
     config: Option<PathBuf>,
-    /// Capture directory to replay ([capture] path).
+    /// Capture directory to replay ([capture] path; sets [capture] source = "replay").
     #[arg(long)]
     replay: Option<PathBuf>,
+    /// Write the frames the source produces to this new (or empty) directory as a capture
+    /// directory while serving: `deard --replay DIR` then processes them again, bit for bit
+    /// ([capture] record).
+    #[arg(long)]
+    record: Option<PathBuf>,
     /// Camera name; the service is dear/<camera>/frames ([service] camera).
     #[arg(long)]
     camera: Option<String>,
@@ -93,7 +98,11 @@ fn effective_config(cli: &Cli) -> Result<Config, deard::config::ConfigError> {
         None => Config::default(),
     };
     if let Some(path) = &cli.replay {
+        config.capture.source = "replay".into();
         config.capture.path = path.clone();
+    }
+    if let Some(path) = &cli.record {
+        config.capture.record = Some(path.clone());
     }
     if let Some(camera) = &cli.camera {
         config.service.camera = camera.clone();

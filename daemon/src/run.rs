@@ -15,6 +15,7 @@ use crate::config::{check_calibration_fits, Config, ConfigError, Pacing};
 use crate::processing::{EngineError, Processor};
 use crate::publish::{FramePublisher, PublisherError};
 use crate::queue::{FrameQueue, Overflow};
+use crate::record::{RecordError, Recorder};
 use crate::shared_memory::{self, SharedMemoryError};
 use crate::stats::Stats;
 
@@ -30,6 +31,9 @@ pub enum RunError {
     /// The live module cannot be opened (its calibration file, a node, a format).
     #[error(transparent)]
     Live(#[from] V4lOpenError),
+    /// `--record`'s directory cannot be made (or has files in it).
+    #[error(transparent)]
+    Record(#[from] RecordError),
     /// The static calibration cannot align a stream of this size.
     #[error(transparent)]
     Calibration(ConfigError),
@@ -118,7 +122,11 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         Pacing::Fast => Overflow::Block,
     };
     let queue = Arc::new(FrameQueue::new(config.capture.queue_depth, overflow));
-    let capture = spawn_capture(source, queue.clone(), shutdown.clone());
+    let recorder = match &config.capture.record {
+        Some(path) => Some(Recorder::start(path, source.recording_manifest())?),
+        None => None,
+    };
+    let capture = spawn_capture(source, recorder, queue.clone(), shutdown.clone());
 
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     let mut watchdog = Watchdog::from_env();
@@ -249,6 +257,7 @@ impl Watchdog {
 /// and the queue's to [`FrameQueue::close`], so the thread can always be joined promptly.
 fn spawn_capture(
     mut source: Box<dyn FrameSource>,
+    mut recorder: Option<Recorder>,
     queue: Arc<FrameQueue<SourceItem>>,
     shutdown: Arc<AtomicBool>,
 ) -> thread::JoinHandle<()> {
@@ -260,11 +269,19 @@ fn spawn_capture(
                 if shutdown.load(Ordering::Relaxed) {
                     break;
                 }
+                if let (Some(rec), SourceItem::Frame { frame, .. }) = (&mut recorder, &item) {
+                    rec.offer(frame);
+                }
                 let end = matches!(item, SourceItem::End | SourceItem::Failed { .. });
                 // Only good frames may be dropped; skip reports, failures and the end marker
                 // always arrive.
                 if !queue.push(item, |i| matches!(i, SourceItem::Frame { .. })) || end {
                     break;
+                }
+            }
+            if let Some(rec) = recorder {
+                if let Err(e) = rec.finish() {
+                    tracing::error!(error = %e, "the recording could not be finished");
                 }
             }
         })

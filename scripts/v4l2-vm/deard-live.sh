@@ -3,6 +3,8 @@
 # node_types=0x101,0x101): deard captures a live "module" made of two vivid instances and a
 # client receives exactly the depth that was fed in; then the nodes vanish (vivid unbound)
 # and come back (bound again), and deard must report the loss, keep serving and resume.
+# deard records what it captured (--record): replaying the recording must publish exactly the
+# fed depths too.
 #
 # The ToF node is instance 0's capture node, fed known 'Y16 ' millimetre frames
 # (/root/fed.y16, scripts/v4l2-vm/fed_frames.py) through vivid's output -> capture loop by
@@ -43,7 +45,8 @@ step "feed $out -> $tof, start deard"
 capture_check feed "$out" "$tof" "Y16 " 640 480 /root/fed.y16 > /tmp/feed.log 2>&1 &
 feeder=$!
 sleep 2
-RUST_LOG=info deard --config /root/deard.toml --stats-interval 2 > /tmp/deard.log 2>&1 &
+RUST_LOG=info deard --config /root/deard.toml --stats-interval 2 --record /tmp/recording \
+    > /tmp/deard.log 2>&1 &
 daemon=$!
 if ! wait_for serving /tmp/deard.log 120; then
     echo "FAILED: deard did not start serving"; cat /tmp/deard.log; exit 1
@@ -79,6 +82,20 @@ kill -TERM $daemon
 wait $daemon; rc=$?
 check "deard exits 0 on SIGTERM" [ $rc = 0 ]
 kill $feeder 2>/dev/null
+check "the recording is finished" grep -q "recording finished" /tmp/deard.log
+
+step "replay the recording"
+RUST_LOG=info deard --config /root/deard.toml --replay /tmp/recording --loop \
+    > /tmp/replay.log 2>&1 &
+replayer=$!
+if wait_for serving /tmp/replay.log 60; then
+    check "the replayed recording publishes the fed depth" \
+        dear-v4l-check --service dear/vm/frames --fed /root/fed.y16 --width 640 --height 480 \
+        --count 4 --timeout-s 120
+else
+    echo "FAILED: deard did not replay the recording"; cat /tmp/replay.log; fail=1
+fi
+kill -TERM $replayer; wait $replayer
 echo "---- deard log (last 40 lines)"
 tail -n 40 /tmp/deard.log
 echo "deard-live: $([ $fail = 0 ] && echo PASSED || echo FAILED)"

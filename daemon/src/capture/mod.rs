@@ -13,6 +13,7 @@ pub mod v4l;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
+use dear_pipeline::capture::CaptureManifest;
 use dear_pipeline::{Calibration, RgbdFrame};
 
 /// What a source produced next.
@@ -44,6 +45,9 @@ pub trait FrameSource: Send {
     fn initial_calibration(&self) -> Calibration;
     /// Human-readable description for logs.
     fn describe(&self) -> String;
+    /// The manifest of a recording of this stream (`deard --record`), without frames: size,
+    /// intrinsics of the output grid, initial calibration, depth scale and where it came from.
+    fn recording_manifest(&self) -> CaptureManifest;
 }
 
 /// Longest uninterrupted sleep of [`sleep_unless`]: how late a shutdown may be noticed.

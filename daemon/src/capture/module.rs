@@ -168,6 +168,20 @@ impl ModuleCalibration {
         Ok(())
     }
 
+    /// The calibration as JSON, for a recording's manifest.
+    pub fn raw_json(&self) -> serde_json::Value {
+        let cam = |c: &Camera| serde_json::json!({"width": c.width, "height": c.height, "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy});
+        serde_json::json!({
+            "depth_scale_m": self.depth_scale_m,
+            "tof": cam(&self.tof),
+            "rgb": cam(&self.rgb),
+            "extrinsics": {
+                "rotation": self.extrinsics.rotation,
+                "translation_m": self.extrinsics.translation_m,
+            },
+        })
+    }
+
     /// The rotation and intrinsics registration of ToF frames onto the RGB grid.
     pub fn registration(&self) -> Registration {
         Registration {

@@ -4,6 +4,7 @@
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
+use dear_pipeline::capture::CaptureManifest;
 use dear_pipeline::capture::{CaptureDir, CaptureError};
 use dear_pipeline::Calibration;
 
@@ -165,6 +166,16 @@ impl FrameSource for ReplaySource {
             self.pacing,
             if self.loop_ { ", looping" } else { "" }
         )
+    }
+    fn recording_manifest(&self) -> CaptureManifest {
+        let mut manifest = self.dir.manifest().clone();
+        manifest.frames.clear();
+        manifest.source = serde_json::json!({
+            "kind": "deard --record of a replay",
+            "replayed": self.dir.root().display().to_string(),
+            "original_source": self.dir.manifest().source,
+        });
+        manifest
     }
 }
 

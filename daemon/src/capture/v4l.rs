@@ -17,6 +17,8 @@ use std::sync::Arc;
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
 
+use dear_pipeline::capture::png::quantize_as_stored;
+use dear_pipeline::capture::CaptureManifest;
 use dear_pipeline::geometry::register::{register_tof, Registration};
 use dear_pipeline::{Calibration, RgbdFrame};
 use dear_v4l2::device::{DeviceError, FormatRequest};
@@ -38,6 +40,9 @@ const BACKOFF_MAX: Duration = Duration::from_secs(5);
 const CHANNEL_DEPTH: usize = 4;
 /// Pairing counts are logged at most this often.
 const PAIR_REPORT: Duration = Duration::from_secs(10);
+/// Depth is rounded to the capture format's unit (1 mm) before processing, and amplitude to
+/// whole units: what `deard --record` writes then replays bit for bit as it was processed.
+const STORED_DEPTH_SCALE: f32 = 0.001;
 
 /// Why the live source cannot start.
 #[derive(Debug, thiserror::Error)]
@@ -91,6 +96,8 @@ pub struct V4lSource {
     size: (u32, u32),
     calibration: Calibration,
     description: String,
+    /// What a recording of this module's stream says about it.
+    manifest: CaptureManifest,
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
     next_index: u64,
@@ -189,6 +196,26 @@ impl V4lSource {
             fps_text(rgb_stream.format().fps),
         );
 
+        let mut manifest =
+            CaptureManifest::new(module.rgb.width, module.rgb.height, module.rgb.intrinsics());
+        manifest.initial_calibration = module.initial_calibration();
+        manifest.depth_scale = STORED_DEPTH_SCALE;
+        if let Some(f) = config.tof.modulation_hz {
+            manifest.modulation_frequencies_hz = vec![f];
+        }
+        manifest.source = serde_json::json!({
+            "kind": "deard --record of a live V4L2 module",
+            "description": description,
+            "calibration_file": config.calibration.display().to_string(),
+            "module": module.raw_json(),
+            "depth": "z-depth in the RGB camera, registered onto the RGB grid (rotation and intrinsics undone; the translation left to the calibration), mm on disk",
+            "amplitude": if matches!(tof_decoding, TofDecoding::Depth { .. }) {
+                "1 where depth is valid: the ToF node delivers depth without amplitude"
+            } else {
+                "0.5·|(D0−D2, D1−D3)| of the 4 phases, raw units"
+            },
+            "timestamps": "CLOCK_MONOTONIC of the RGB buffer, ns",
+        });
         let (tx, rx) = mpsc::sync_channel(CHANNEL_DEPTH);
         let stop = Arc::new(AtomicBool::new(false));
         let tof_frame = frame_format(tof_format, &tof_stream);
@@ -218,6 +245,7 @@ impl V4lSource {
             size: (module.rgb.width, module.rgb.height),
             calibration: module.initial_calibration(),
             description,
+            manifest,
             stop,
             threads,
             next_index: 0,
@@ -228,20 +256,22 @@ impl V4lSource {
     /// The RgbdFrame of a pair: ToF images registered onto the RGB grid.
     fn frame(&mut self, tof: TofImages, rgb: Array3<u8>, ts_us: u64) -> RgbdFrame {
         let (w, h) = (self.size.0 as usize, self.size.1 as usize);
-        let (depth, amplitude) = if self.registration.is_identity() && tof.depth.dim() == (h, w) {
-            (tof.depth, tof.amplitude)
-        } else {
-            let mut depth = Array2::zeros((h, w));
-            let mut amplitude = Array2::zeros((h, w));
-            register_tof(
-                &self.registration,
-                tof.depth.view(),
-                tof.amplitude.view(),
-                depth.view_mut(),
-                amplitude.view_mut(),
-            );
-            (depth, amplitude)
-        };
+        let (mut depth, mut amplitude) =
+            if self.registration.is_identity() && tof.depth.dim() == (h, w) {
+                (tof.depth, tof.amplitude)
+            } else {
+                let mut depth = Array2::zeros((h, w));
+                let mut amplitude = Array2::zeros((h, w));
+                register_tof(
+                    &self.registration,
+                    tof.depth.view(),
+                    tof.amplitude.view(),
+                    depth.view_mut(),
+                    amplitude.view_mut(),
+                );
+                (depth, amplitude)
+            };
+        quantize_as_stored(depth.view_mut(), amplitude.view_mut(), STORED_DEPTH_SCALE);
         let index = self.next_index;
         self.next_index += 1;
         RgbdFrame {
@@ -560,6 +590,10 @@ impl FrameSource for V4lSource {
 
     fn describe(&self) -> String {
         self.description.clone()
+    }
+
+    fn recording_manifest(&self) -> CaptureManifest {
+        self.manifest.clone()
     }
 }
 

@@ -12,7 +12,7 @@ use std::path::Path;
 
 use image::codecs::png::PngDecoder;
 use image::{ColorType, DynamicImage, ImageBuffer, ImageDecoder, Limits, Luma, Rgb};
-use ndarray::{Array2, Array3, ArrayView2, ArrayView3};
+use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayViewMut2};
 
 use super::error::CaptureError;
 use super::manifest::MAX_SIDE;
@@ -243,14 +243,67 @@ pub fn write_depth(path: &Path, depth: ArrayView2<f32>, scale: f32) -> Result<()
     write_u16(path, depth_to_u16(depth, scale).view())
 }
 
-/// Writes raw amplitude (f32 sensor units) as 16-bit, rounded and clamped to `0..=65535`.
+/// Converts raw amplitude (f32 sensor units) to the 16-bit on-disk unit: rounded and clamped
+/// to `0..=65535`, non-finite → 0.
+pub fn amplitude_to_u16(a: f32) -> u16 {
+    if a.is_finite() {
+        a.round().clamp(0.0, 65535.0) as u16
+    } else {
+        0
+    }
+}
+
+/// Writes raw amplitude (f32 sensor units) as 16-bit ([`amplitude_to_u16`]).
 pub fn write_amplitude(path: &Path, amplitude: ArrayView2<f32>) -> Result<(), CaptureError> {
-    let values = amplitude.mapv(|a| {
-        if a.is_finite() {
-            a.round().clamp(0.0, 65535.0) as u16
+    write_u16(path, amplitude.mapv(amplitude_to_u16).view())
+}
+
+/// Rounds a frame's depth (to units of `depth_scale`) and amplitude (to whole units) to what a
+/// capture directory stores, in place: a live source that does this processes exactly the
+/// values its recording replays ([`read_depth`] gives back `u16 · scale`, bit for bit).
+pub fn quantize_as_stored(
+    mut depth: ArrayViewMut2<f32>,
+    mut amplitude: ArrayViewMut2<f32>,
+    depth_scale: f32,
+) {
+    depth.mapv_inplace(|z| {
+        if crate::geometry::is_valid_depth(z) {
+            (z / depth_scale).round().clamp(0.0, 65535.0) as u16 as f32 * depth_scale
         } else {
-            0
+            0.0
         }
     });
-    write_u16(path, values.view())
+    amplitude.mapv_inplace(|a| amplitude_to_u16(a) as f32);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantized_planes_are_what_a_written_and_read_capture_gives_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut depth =
+            Array2::from_shape_fn((6, 7), |(y, x)| 0.3 + 0.123_456 * (x + 7 * y) as f32);
+        depth[(0, 0)] = 0.0;
+        depth[(1, 1)] = f32::NAN;
+        let mut amplitude = depth.mapv(|d| d * 97.3);
+        let scale = 0.001;
+        quantize_as_stored(depth.view_mut(), amplitude.view_mut(), scale);
+        let (dp, ap) = (dir.path().join("d.png"), dir.path().join("a.png"));
+        write_depth(&dp, depth.view(), scale).unwrap();
+        write_amplitude(&ap, amplitude.view()).unwrap();
+        let back = read_depth(&dp, Some((7, 6)), scale).unwrap();
+        let amp_back = read_u16(&ap, Some((7, 6))).unwrap().mapv(|v| v as f32);
+        // Bit for bit: a live frame processed after quantising equals its replay.
+        assert!(back
+            .iter()
+            .zip(&depth)
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
+        assert!(amp_back
+            .iter()
+            .zip(&amplitude)
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
+        assert_eq!(depth[(1, 1)], 0.0, "invalid depth is stored as 0");
+    }
 }

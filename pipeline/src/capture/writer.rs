@@ -97,8 +97,10 @@ impl CaptureWriter {
         Ok(())
     }
 
-    /// Writes `capture.json` (via a temporary file and a rename) and returns the directory.
-    pub fn finish(self) -> Result<PathBuf, CaptureError> {
+    /// Writes `capture.json` listing the frames written so far (via a temporary file and a
+    /// rename, so a reader sees the old or the new list, never half of one): a recording that
+    /// does this now and then stays replayable up to its last update if its writer dies.
+    pub fn write_manifest(&self) -> Result<(), CaptureError> {
         let path = self.root.join(MANIFEST_FILE);
         let tmp = self.root.join(format!("{MANIFEST_FILE}.tmp"));
         let text =
@@ -107,7 +109,12 @@ impl CaptureWriter {
                 message: e.to_string(),
             })?;
         fs::write(&tmp, text).map_err(|e| CaptureError::io(&tmp, e))?;
-        fs::rename(&tmp, &path).map_err(|e| CaptureError::io(&path, e))?;
+        fs::rename(&tmp, &path).map_err(|e| CaptureError::io(&path, e))
+    }
+
+    /// Writes `capture.json` (via a temporary file and a rename) and returns the directory.
+    pub fn finish(self) -> Result<PathBuf, CaptureError> {
+        self.write_manifest()?;
         Ok(self.root)
     }
 }

@@ -1,0 +1,206 @@
+//! `deard --record DIR`: the frames the source produced, written as a capture directory while
+//! the daemon serves — sensor planes (RGB, depth, amplitude), the source's calibration and
+//! timestamps — so that `deard --replay DIR` processes the same frames again, bit for bit (a
+//! live source rounds its planes to what the format stores before processing them).
+//!
+//! Writing three PNGs per frame must not slow the capture: frames go to a writer thread through
+//! a short queue, and when the disk falls behind a frame is left out of the recording (counted,
+//! logged) rather than delaying the stream. The manifest is rewritten every
+//! [`MANIFEST_EVERY`] frames, so a recording cut short by a crash replays up to that point.
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{self, SyncSender, TrySendError};
+use std::thread::{self, JoinHandle};
+
+use dear_pipeline::capture::{CaptureError, CaptureManifest, CaptureWriter};
+use dear_pipeline::RgbdFrame;
+
+/// Frames waiting for the writer.
+const QUEUE: usize = 8;
+/// Frames between manifest rewrites.
+const MANIFEST_EVERY: usize = 30;
+
+/// Why a recording cannot start.
+#[derive(Debug, thiserror::Error)]
+#[error("--record {}: {source}", path.display())]
+pub struct RecordError {
+    path: PathBuf,
+    #[source]
+    source: CaptureError,
+}
+
+/// What a finished recording holds.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct RecordSummary {
+    pub written: usize,
+    /// Frames left out because the writer was behind.
+    pub left_out: u64,
+    /// Frames left out because they came before the last one written (a looping replay
+    /// starting over): a capture's timestamps only go forward.
+    pub out_of_order: u64,
+}
+
+/// The writer thread and the queue to it.
+pub struct Recorder {
+    tx: Option<SyncSender<Box<RgbdFrame>>>,
+    thread: Option<JoinHandle<Result<RecordSummary, CaptureError>>>,
+    left_out: u64,
+    path: PathBuf,
+}
+
+impl Recorder {
+    /// Creates the directory (new or empty) and starts the writer.
+    pub fn start(path: &Path, manifest: CaptureManifest) -> Result<Self, RecordError> {
+        let mut writer = CaptureWriter::create(path, manifest).map_err(|source| RecordError {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let (tx, rx) = mpsc::sync_channel::<Box<RgbdFrame>>(QUEUE);
+        let thread = thread::Builder::new()
+            .name("record".into())
+            .spawn(move || {
+                let mut summary = RecordSummary::default();
+                let mut last_ts = None;
+                for mut frame in rx {
+                    if last_ts.is_some_and(|t| frame.timestamp_ns < t) {
+                        summary.out_of_order += 1;
+                        continue;
+                    }
+                    last_ts = Some(frame.timestamp_ns);
+                    // Sequential ids: a looping replay repeats its own.
+                    frame.index = summary.written as u64;
+                    writer.write_frame(&frame)?;
+                    summary.written += 1;
+                    if summary.written % MANIFEST_EVERY == 0 {
+                        writer.write_manifest()?;
+                    }
+                }
+                writer.finish()?;
+                Ok(summary)
+            })
+            .expect("spawn the recording thread");
+        tracing::info!(path = %path.display(), "recording the source's frames");
+        Ok(Recorder {
+            tx: Some(tx),
+            thread: Some(thread),
+            left_out: 0,
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// Queues a copy of `frame` (ground truth, which a source never has live, is not written);
+    /// leaves it out when the writer is behind or has stopped on an error.
+    pub fn offer(&mut self, frame: &RgbdFrame) {
+        let Some(tx) = &self.tx else { return };
+        let copy = Box::new(RgbdFrame {
+            index: frame.index,
+            timestamp_ns: frame.timestamp_ns,
+            rgb: frame.rgb.clone(),
+            amplitude: frame.amplitude.clone(),
+            depth: frame.depth.clone(),
+            gt_depth: None,
+            mask: None,
+            flow: None,
+            perturbation: None,
+        });
+        match tx.try_send(copy) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_)) => {
+                self.left_out += 1;
+                if self.left_out.is_power_of_two() {
+                    tracing::warn!(left_out = self.left_out, path = %self.path.display(), "the recording falls behind the stream: frames left out of it");
+                }
+            }
+            Err(TrySendError::Disconnected(_)) => {
+                // The writer stopped on an error; `finish` reports it.
+                self.tx = None;
+            }
+        }
+    }
+
+    /// Writes what is queued and the manifest; logs and returns what the recording holds.
+    pub fn finish(mut self) -> Result<RecordSummary, RecordError> {
+        self.tx = None;
+        let result = self
+            .thread
+            .take()
+            .expect("finish runs once")
+            .join()
+            .expect("the recording thread does not panic");
+        let mut summary = result.map_err(|source| RecordError {
+            path: self.path.clone(),
+            source,
+        })?;
+        summary.left_out = self.left_out;
+        tracing::info!(path = %self.path.display(), written = summary.written, left_out = summary.left_out, out_of_order = summary.out_of_order, "recording finished");
+        Ok(summary)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dear_pipeline::capture::{CaptureDir, Intrinsics};
+    use ndarray::{Array2, Array3};
+
+    fn frame(index: u64, timestamp_ns: u64) -> RgbdFrame {
+        RgbdFrame {
+            index,
+            timestamp_ns,
+            rgb: Array3::from_elem((4, 5, 3), index as u8),
+            amplitude: Array2::from_elem((4, 5), 100.0 + index as f32),
+            depth: Array2::from_elem((4, 5), 1.0 + 0.001 * index as f32),
+            gt_depth: Some(Array2::zeros((4, 5))),
+            mask: None,
+            flow: None,
+            perturbation: None,
+        }
+    }
+
+    fn manifest() -> CaptureManifest {
+        CaptureManifest::new(
+            5,
+            4,
+            Intrinsics {
+                fx: 5.0,
+                fy: 5.0,
+                cx: 2.0,
+                cy: 1.5,
+            },
+        )
+    }
+
+    #[test]
+    fn a_recording_replays_the_frames_it_was_offered() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rec");
+        let mut rec = Recorder::start(&path, manifest()).unwrap();
+        // A looping replay: ids repeat and time goes back after the third frame.
+        for (i, ts) in [(7, 100), (8, 200), (9, 300), (7, 100)] {
+            rec.offer(&frame(i, ts));
+        }
+        let summary = rec.finish().unwrap();
+        assert_eq!(summary.written, 3);
+        assert_eq!(summary.out_of_order, 1);
+        let capture = CaptureDir::open(&path).unwrap();
+        assert_eq!(capture.len(), 3);
+        for k in 0..3 {
+            let read = capture.read_frame(k).unwrap();
+            let want = frame(7 + k as u64, 100 * (k as u64 + 1));
+            assert_eq!(read.index, k as u64);
+            assert_eq!(read.rgb, want.rgb);
+            assert_eq!(read.depth, want.depth.mapv(|d| (d / 0.001).round() * 0.001));
+            assert_eq!(read.amplitude, want.amplitude);
+            assert!(read.gt_depth.is_none(), "ground truth is not recorded");
+        }
+    }
+
+    #[test]
+    fn a_directory_with_files_is_refused_by_name() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("keep.txt"), "x").unwrap();
+        let err = Recorder::start(dir.path(), manifest()).err().unwrap();
+        assert!(err.to_string().contains("--record"), "{err}");
+        assert!(err.to_string().contains("files in it"), "{err}");
+    }
+}
