@@ -335,6 +335,10 @@ pub struct RuntimeConfig {
     pub exit_when_done: bool,
     /// Log filter (tracing `EnvFilter` syntax); `RUST_LOG` overrides it.
     pub log: String,
+    /// Where the online calibration estimate is kept across restarts (written at every
+    /// statistics line and at shutdown, restored at start for a stream of the same size unless
+    /// `[pipeline] static_calibration` is set); none = not kept.
+    pub state_file: Option<PathBuf>,
 }
 
 impl Default for RuntimeConfig {
@@ -343,6 +347,7 @@ impl Default for RuntimeConfig {
             stats_interval_s: 5.0,
             exit_when_done: false,
             log: "info".into(),
+            state_file: None,
         }
     }
 }

@@ -6,6 +6,7 @@
 //! the TOML configuration, [`stats`] the live statistics, [`run`] the daemon's life cycle,
 //! [`shared_memory`] what a stream needs of it.
 
+pub mod calibration_state;
 pub mod capture;
 pub mod config;
 pub mod iceoryx_log;

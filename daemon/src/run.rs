@@ -1,13 +1,16 @@
 //! The daemon's life: open the source and the service, run capture and processing on their own
 //! threads joined by a bounded queue, publish, report, and shut down cleanly on SIGINT/SIGTERM.
 
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::thread;
 use std::time::{Duration, Instant};
 
+use dear_pipeline::Calibration;
 use dear_proto::{FrameHeader, Stage};
 
+use crate::calibration_state::CalibrationState;
 use crate::capture::replay::{ReplayOpenError, ReplaySource};
 use crate::capture::v4l::{V4lOpenError, V4lSource};
 use crate::capture::{FrameSource, SourceItem};
@@ -76,7 +79,14 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         _ => Box::new(ReplaySource::open(&config.capture)?),
     };
     let (width, height) = source.size();
-    let calibration = match config.pipeline.static_calibration {
+    let restored = match (
+        &config.runtime.state_file,
+        config.pipeline.static_calibration,
+    ) {
+        (Some(path), None) => restore_calibration(path, width, height),
+        _ => None,
+    };
+    let calibration = match config.pipeline.static_calibration.or(restored) {
         Some(calibration) => {
             check_calibration_fits("[pipeline] static_calibration", &calibration, width, height)
                 .map_err(RunError::Calibration)?;
@@ -103,7 +113,8 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         }
     };
     let service = config.service.service_name();
-    tracing::info!(source = %source.describe(), %service, width, height, ?calibration, bundle = ?config.pipeline.bundle, refine = ?config.pipeline.refine, "starting");
+    let source_description = source.describe();
+    tracing::info!(source = %source_description, %service, width, height, ?calibration, bundle = ?config.pipeline.bundle, refine = ?config.pipeline.refine, "starting");
 
     // The transport's files (frames included) live in its root directory: made (or checked
     // to be this user's) before anything else, so the free-space check reads its file system.
@@ -135,6 +146,10 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
     let mut last_cleanup = Instant::now();
     let mut source_ended = false;
     let mut failure = None;
+    // The header of the latest frame whose calibration came from the online estimator, saved
+    // to `[runtime] state_file` at every statistics line and at shutdown.
+    let mut latest_estimate: Option<FrameHeader> = None;
+    let description = source_description;
     while !shutdown.load(Ordering::Relaxed) {
         match queue.pop(Duration::from_millis(100)) {
             Some(SourceItem::Frame {
@@ -150,7 +165,12 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
                 match publisher.publish(header, arrived, |h, out| {
                     processor.process_into(&frame, h, out)
                 }) {
-                    Ok(sent) => stats.record(&sent),
+                    Ok(sent) => {
+                        stats.record(&sent);
+                        if sent.flags & dear_proto::flags::CALIBRATION_ONLINE != 0 {
+                            latest_estimate = Some(sent);
+                        }
+                    }
                     Err(reason) => {
                         stats.skipped += 1;
                         tracing::warn!(frame = frame.index, %reason, "frame skipped");
@@ -192,6 +212,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
             last_cleanup = Instant::now();
         }
         if let Some(report) = stats.poll() {
+            save_calibration(config, latest_estimate.take(), &description);
             if !(source_ended && report.fps == 0.0) {
                 tracing::info!(
                     published = stats.published,
@@ -204,6 +225,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         }
     }
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
+    save_calibration(config, latest_estimate.take(), &description);
     queue.close();
     stats.dropped = queue.dropped();
     if capture.join().is_err() {
@@ -220,6 +242,43 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
     match failure {
         Some(reason) => Err(RunError::SourceFailed(reason)),
         None => Ok(stats),
+    }
+}
+
+/// The calibration saved by an earlier run, when `[runtime] state_file` has one for a stream of
+/// this size. A damaged or unreadable file is logged and left for the next save to replace:
+/// the daemon starts with the source's calibration rather than not at all.
+fn restore_calibration(path: &Path, width: u32, height: u32) -> Option<Calibration> {
+    match CalibrationState::load(path) {
+        Ok(Some(state))
+            if (state.width, state.height) == (width, height)
+                && check_calibration_fits("saved", &state.calibration, width, height).is_ok() =>
+        {
+            tracing::info!(path = %path.display(), calibration = ?state.calibration, quality = state.quality, age_s = state.age().as_secs(), saved_from = %state.source, "restored the online calibration estimate of an earlier run");
+            Some(state.calibration)
+        }
+        Ok(Some(state)) => {
+            tracing::warn!(path = %path.display(), saved = ?(state.width, state.height), stream = ?(width, height), calibration = ?state.calibration, "the saved calibration is for another frame size or does not fit it: not used");
+            None
+        }
+        Ok(None) => None,
+        Err(e) => {
+            tracing::warn!(error = %e, "the saved calibration cannot be used; starting from the source's");
+            None
+        }
+    }
+}
+
+/// Saves the estimate `header` carries to `[runtime] state_file` (when set); a failure is
+/// logged, not fatal.
+fn save_calibration(config: &Config, header: Option<FrameHeader>, source: &str) {
+    let (Some(path), Some(header)) = (&config.runtime.state_file, header) else {
+        return;
+    };
+    if let Some(state) = CalibrationState::from_header(&header, source) {
+        if let Err(e) = state.save(path) {
+            tracing::warn!(error = %e, "cannot save the calibration estimate");
+        }
     }
 }
 
