@@ -18,7 +18,7 @@
 #   --self-test       boots, lists vivid's nodes and formats, streams frames from its capture
 #                     node and checks the output -> capture loop byte for byte
 #                     (scripts/v4l2-vm/self-test.sh with scripts/v4l2-vm/capture_check.c)
-#   --deard           the daemon end to end (scripts/v4l2-vm/deard-live.sh): two vivid
+#   --deard           the daemon end to end (scripts/v4l2-vm/deard-live.sh): three vivid
 #                     instances; known 'Y16 ' depth frames (millimetres) are fed into the first
 #                     one's output and looped into its capture node (the ToF node), the second's
 #                     capture node is the RGB node (YUYV); deard (target/release, built first:
@@ -117,8 +117,8 @@ done
 if ! $self_test && ! $deard && ! $prepare_only; then
     [ -n "$run_script" ] || die "nothing to run: give --run SCRIPT, --self-test or --deard (see --help)"
 fi
-# --deard: two vivid instances, each a capture and an output node (video0..3).
-if $deard && [ -z "$vivid_params" ]; then vivid_params='n_devs=2 node_types=0x101,0x101'; fi
+# --deard: three vivid instances: two with a capture and an output node, one capture only.
+if $deard && [ -z "$vivid_params" ]; then vivid_params='n_devs=3 node_types=0x101,0x101,0x1'; fi
 [ -z "$run_script" ] || [ -f "$run_script" ] || die "--run: no file $run_script"
 for b in "${bins[@]+"${bins[@]}"}"; do [ -f "$b" ] || die "--bin: no file $b"; done
 for f in "${files[@]+"${files[@]}"}"; do

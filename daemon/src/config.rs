@@ -143,6 +143,10 @@ pub struct V4lConfig {
     pub calibration: PathBuf,
     pub tof: TofNodeConfig,
     pub rgb: NodeConfig,
+    /// With a depth format (`Z16 `/`Y16 `): the node of the same sensor's amplitude / IR image
+    /// (`GREY`, `Y16 `; RealSense's infrared node), paired with the depth by timestamp. Without
+    /// it, amplitude is 1 wherever depth is valid.
+    pub amplitude: Option<NodeConfig>,
     /// Largest timestamp difference of a ToF and an RGB frame that are paired, milliseconds;
     /// none = half the slower node's frame period.
     pub pair_tolerance_ms: Option<f64>,
@@ -479,10 +483,25 @@ impl Config {
 /// role, sizes within the capture limits, 4-phase parameters where the format needs them.
 fn check_v4l(v4l: &V4lConfig) -> Result<(), String> {
     use dear_v4l2::pixel::PixelFormat as P;
-    let roles: [(&str, &NodeConfig, &[P]); 2] = [
+    let mut roles: Vec<(&str, &NodeConfig, &[P])> = vec![
         ("tof", &v4l.tof.node, &[P::Z16, P::Y16, P::Y12, P::Y12P]),
         ("rgb", &v4l.rgb, &[P::Yuyv, P::Nv12, P::Rgb3, P::Mjpg]),
     ];
+    if let Some(amplitude) = &v4l.amplitude {
+        roles.push(("amplitude", amplitude, &[P::Grey, P::Y16]));
+        if matches!(node_format(&v4l.tof.node), Ok(P::Y12 | P::Y12P)) {
+            return Err(
+                "[capture.v4l.amplitude] is for depth formats: a 4-phase ToF node's amplitude comes from its phases"
+                    .into(),
+            );
+        }
+        if (amplitude.width, amplitude.height) != (v4l.tof.node.width, v4l.tof.node.height) {
+            return Err(format!(
+                "[capture.v4l.amplitude] {}x{} must be the ToF node's {}x{} (one sensor, one grid)",
+                amplitude.width, amplitude.height, v4l.tof.node.width, v4l.tof.node.height
+            ));
+        }
+    }
     for (role, node, allowed) in roles {
         let key = format!("[capture.v4l.{role}]");
         let format = node_format(node).map_err(|e| format!("{key} {e}"))?;
@@ -492,7 +511,7 @@ fn check_v4l(v4l: &V4lConfig) -> Result<(), String> {
                 .map(|f| format!("{:?}", f.to_string()))
                 .collect();
             return Err(format!(
-                "{key} format = {:?} is not a {role} format the daemon decodes: {}",
+                "{key} format = {:?} is not one the daemon decodes for the {role} node: {}",
                 node.format,
                 names.join(", ")
             ));

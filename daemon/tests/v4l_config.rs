@@ -45,6 +45,13 @@ fn the_documented_live_configuration_parses() {
         (v4l.rgb.width, v4l.rgb.height, v4l.rgb.fps),
         (640, 480, Some(30))
     );
+    assert!(v4l.amplitude.is_none());
+    let with_ir = v4l_tables() + "\n[capture.v4l.amplitude]\ndevice = \"/dev/video1\"\nformat = \"Y16 \"\nwidth = 640\nheight = 480\n";
+    let config = Config::from_toml(&live(&with_ir)).unwrap();
+    assert_eq!(
+        config.capture.v4l.unwrap().amplitude.unwrap().format,
+        "Y16 "
+    );
 }
 
 #[test]
@@ -65,7 +72,7 @@ fn values_that_cannot_work_are_refused_by_key() {
         ),
         (
             live(&tables.replace("format = \"YUYV\"", "format = \"Z16 \"")),
-            "not a rgb format",
+            "not one the daemon decodes for the rgb node",
         ),
         (
             live(&tables.replace("format = \"Z16 \"", "format = \"Y12 \"")),
@@ -86,6 +93,18 @@ fn values_that_cannot_work_are_refused_by_key() {
         (
             live(&tables.replace("calibration = \"/etc/deard/module.toml\"", "")),
             "calibration",
+        ),
+        (
+            live(&(tables.clone() + "\n[capture.v4l.amplitude]\ndevice = \"/dev/video1\"\nformat = \"GREY\"\nwidth = 320\nheight = 240\n")),
+            "must be the ToF node's 640x480",
+        ),
+        (
+            live(&(tables.clone() + "\n[capture.v4l.amplitude]\ndevice = \"/dev/video1\"\nformat = \"YUYV\"\nwidth = 640\nheight = 480\n")),
+            "not one the daemon decodes for the amplitude node",
+        ),
+        (
+            live(&(tables.replace("format = \"Z16 \"", "format = \"Y12 \"\nmodulation_hz = 75e6") + "\n[capture.v4l.amplitude]\ndevice = \"/dev/video1\"\nformat = \"GREY\"\nwidth = 640\nheight = 480\n")),
+            "is for depth formats",
         ),
     ];
     for (toml, says) in cases {

@@ -1,6 +1,6 @@
 #!/bin/sh
-# Guest script of `scripts/test-v4l2-vm.sh --deard` (busybox sh, vivid n_devs=2
-# node_types=0x101,0x101): deard captures a live "module" made of two vivid instances and a
+# Guest script of `scripts/test-v4l2-vm.sh --deard` (busybox sh, vivid n_devs=3
+# node_types=0x101,0x101,0x1): deard captures a live "module" made of two vivid instances and a
 # client receives exactly the depth that was fed in; then the nodes vanish (vivid unbound)
 # and come back (bound again), and deard must report the loss, keep serving and resume.
 # deard records what it captured (--record): replaying the recording must publish exactly the
@@ -30,7 +30,7 @@ check() { # check DESCRIPTION COMMAND...: runs it, records a failure
     d=$1; shift
     if "$@"; then echo "ok: $d"; else echo "FAILED: $d"; fail=1; fi
 }
-nodes || { echo "deard-live: vivid nodes missing (n_devs=2 node_types=0x101,0x101?)"; exit 1; }
+nodes || { echo "deard-live: vivid nodes missing (n_devs=3 node_types=0x101,0x101,0x1?)"; exit 1; }
 sed -i "s|/dev/video0|$tof|; s|/dev/video2|$rgb|" /root/deard.toml
 echo "deard-live: ToF $tof (fed through $out), RGB $rgb"
 
@@ -96,6 +96,31 @@ else
     echo "FAILED: deard did not replay the recording"; cat /tmp/replay.log; fail=1
 fi
 kill -TERM $replayer; wait $replayer
+
+step "three nodes: depth, amplitude (instance 2's GREY webcam) and RGB"
+amp=$(node vivid-002-vid-cap) || { echo "FAILED: no third vivid instance"; fail=1; }
+if [ -n "$amp" ]; then
+    cp /root/deard.toml /root/deard-amp.toml
+    printf '\n[capture.v4l.amplitude]\ndevice = "%s"\nformat = "GREY"\nwidth = 640\nheight = 480\nfps = 25\n' \
+        "$amp" >> /root/deard-amp.toml
+    capture_check feed "$out" "$tof" "Y16 " 640 480 /root/fed.y16 >> /tmp/feed.log 2>&1 &
+    feeder=$!
+    RUST_LOG=info deard --config /root/deard-amp.toml > /tmp/amp.log 2>&1 &
+    daemon=$!
+    if wait_for serving /tmp/amp.log 60; then
+        grep starting /tmp/amp.log
+        # vivid's instances run on their own clocks: only depth frames with an amplitude frame
+        # within a quarter period pair (about half of them here; a module's two images share
+        # one exposure's timestamp).
+        check "with an amplitude node, the client receives the fed depth" \
+            dear-v4l-check --service dear/vm/frames --fed /root/fed.y16 --width 640 \
+            --height 480 --count 4 --timeout-s 180
+    else
+        echo "FAILED: deard with an amplitude node did not start"; cat /tmp/amp.log; fail=1
+    fi
+    kill -TERM $daemon; wait $daemon
+    kill $feeder 2>/dev/null
+fi
 echo "---- deard log (last 40 lines)"
 tail -n 40 /tmp/deard.log
 echo "deard-live: $([ $fail = 0 ] && echo PASSED || echo FAILED)"

@@ -11,6 +11,7 @@
 //! clients resume receiving when frames flow again. Errors at start (a node missing or busy, no
 //! permission, a format the node does not offer) stop the daemon with the node and the reason.
 
+use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender};
 use std::sync::Arc;
@@ -75,6 +76,10 @@ enum NodeMsg {
         ts_us: u64,
         rgb: Array3<u8>,
     },
+    Amplitude {
+        ts_us: u64,
+        amplitude: Array2<f32>,
+    },
     /// A buffer that could not be decoded (or the driver flagged as corrupt).
     Bad {
         reason: String,
@@ -92,6 +97,11 @@ enum NodeMsg {
 pub struct V4lSource {
     rx: Receiver<NodeMsg>,
     pairer: Pairer<TofImages, Array3<u8>>,
+    /// With an amplitude node: depth and amplitude of one sensor, paired first (their
+    /// timestamps are one exposure's).
+    amplitude_pairer: Option<Pairer<TofImages, Array2<f32>>>,
+    /// Complete frames waiting to be handed out (one message can complete several).
+    ready: VecDeque<Pair<TofImages, Array3<u8>>>,
     registration: Registration,
     size: (u32, u32),
     calibration: Calibration,
@@ -170,6 +180,10 @@ impl V4lSource {
 
         let tof_stream = open_node("tof", &config.tof.node)?;
         let rgb_stream = open_node("rgb", &config.rgb)?;
+        let amplitude_stream = match &config.amplitude {
+            Some(node) => Some((node, open_node("amplitude", node)?)),
+            None => None,
+        };
         let periods: Vec<u64> = [tof_stream.format().fps, rgb_stream.format().fps]
             .iter()
             .map(|fps| fps.map_or(33_333, |f| (1e6 / f) as u64))
@@ -195,6 +209,17 @@ impl V4lSource {
             config.rgb.height,
             fps_text(rgb_stream.format().fps),
         );
+        let description = match &amplitude_stream {
+            Some((node, stream)) => format!(
+                "{description}, amplitude {} {:?} {}x{}{}",
+                node.device.display(),
+                node.format,
+                node.width,
+                node.height,
+                fps_text(stream.format().fps)
+            ),
+            None => description,
+        };
 
         let mut manifest =
             CaptureManifest::new(module.rgb.width, module.rgb.height, module.rgb.intrinsics());
@@ -209,10 +234,10 @@ impl V4lSource {
             "calibration_file": config.calibration.display().to_string(),
             "module": module.raw_json(),
             "depth": "z-depth in the RGB camera, registered onto the RGB grid (rotation and intrinsics undone; the translation left to the calibration), mm on disk",
-            "amplitude": if matches!(tof_decoding, TofDecoding::Depth { .. }) {
-                "1 where depth is valid: the ToF node delivers depth without amplitude"
-            } else {
-                "0.5·|(D0−D2, D1−D3)| of the 4 phases, raw units"
+            "amplitude": match (tof_decoding, &config.amplitude) {
+                (TofDecoding::Phase { .. }, _) => "0.5·|(D0−D2, D1−D3)| of the 4 phases, raw units".to_string(),
+                (TofDecoding::Depth { .. }, Some(node)) => format!("the amplitude node {}'s raw values", node.device.display()),
+                (TofDecoding::Depth { .. }, None) => "1 where depth is valid: no amplitude node is configured".to_string(),
             },
             "timestamps": "CLOCK_MONOTONIC of the RGB buffer, ns",
         });
@@ -220,7 +245,24 @@ impl V4lSource {
         let stop = Arc::new(AtomicBool::new(false));
         let tof_frame = frame_format(tof_format, &tof_stream);
         let rgb_frame = frame_format(rgb_format, &rgb_stream);
-        let threads = vec![
+        let mut amplitude_pairer = None;
+        let mut threads = Vec::new();
+        if let Some((node, stream)) = amplitude_stream {
+            let format = node_format(node).map_err(|m| cfg_err("amplitude", m))?;
+            let frame = frame_format(format, &stream);
+            // One sensor's two images of one exposure: their timestamps agree to well within a
+            // quarter period.
+            amplitude_pairer = Some(Pairer::new(periods[0] / 4));
+            threads.push(spawn_node(
+                "amplitude",
+                node.clone(),
+                stream,
+                AmplitudeDecoder { frame },
+                tx.clone(),
+                stop.clone(),
+            ));
+        }
+        threads.extend([
             spawn_node(
                 "tof",
                 config.tof.node.clone(),
@@ -237,10 +279,12 @@ impl V4lSource {
                 tx,
                 stop.clone(),
             ),
-        ];
+        ]);
         Ok(V4lSource {
             rx,
             pairer: Pairer::new(tolerance_us),
+            amplitude_pairer,
+            ready: VecDeque::new(),
             registration: module.registration(),
             size: (module.rgb.width, module.rgb.height),
             calibration: module.initial_calibration(),
@@ -297,6 +341,24 @@ impl V4lSource {
             arrived,
             decode_us: arrived.elapsed().as_micros() as u32,
         }
+    }
+
+    /// Depth frames that found their amplitude, on to the pairing with RGB; returns the first
+    /// complete frame and keeps the others in `ready`.
+    fn depth_with_amplitude(
+        &mut self,
+        first: Option<Pair<TofImages, Array2<f32>>>,
+    ) -> Option<Pair<TofImages, Array3<u8>>> {
+        let mut next = first;
+        while let Some(p) = next {
+            let mut images = p.a;
+            images.amplitude = p.b;
+            if let Some(done) = self.pairer.push_a(p.ts_a_us, images) {
+                self.ready.push_back(done);
+            }
+            next = self.amplitude_pairer.as_mut().and_then(|a| a.pop_ready());
+        }
+        self.ready.pop_front()
     }
 
     fn report_pairing(&mut self) {
@@ -368,6 +430,23 @@ impl Decoder for RgbDecoder {
         Ok(Some(NodeMsg::Rgb {
             ts_us: buffer.timestamp_us.max(0) as u64,
             rgb,
+        }))
+    }
+}
+
+/// The amplitude / IR node of a depth module.
+struct AmplitudeDecoder {
+    frame: FrameFormat,
+}
+
+impl Decoder for AmplitudeDecoder {
+    fn decode(&mut self, buffer: &Buffer) -> Result<Option<NodeMsg>, String> {
+        let mut amplitude = Array2::zeros((self.frame.height, self.frame.width));
+        pixel::depth::intensity_into(&self.frame, buffer.data, amplitude.view_mut())
+            .map_err(|e| e.to_string())?;
+        Ok(Some(NodeMsg::Amplitude {
+            ts_us: buffer.timestamp_us.max(0) as u64,
+            amplitude,
         }))
     }
 }
@@ -544,8 +623,8 @@ impl FrameSource for V4lSource {
             if shutdown.load(Ordering::Relaxed) {
                 return SourceItem::End;
             }
-            // One push can complete more than one pair: hand those out first.
-            if let Some(pair) = self.pairer.pop_ready() {
+            // One message can complete more than one pair: hand those out first.
+            if let Some(pair) = self.ready.pop_front().or_else(|| self.pairer.pop_ready()) {
                 return self.item(pair);
             }
             let msg = match self.rx.recv_timeout(Duration::from_millis(100)) {
@@ -558,7 +637,20 @@ impl FrameSource for V4lSource {
                 }
             };
             let pair = match msg {
-                NodeMsg::Tof { ts_us, images } => self.pairer.push_a(ts_us, images),
+                NodeMsg::Tof { ts_us, images } => match &mut self.amplitude_pairer {
+                    None => self.pairer.push_a(ts_us, images),
+                    Some(amp) => {
+                        let first = amp.push_a(ts_us, images);
+                        self.depth_with_amplitude(first)
+                    }
+                },
+                NodeMsg::Amplitude { ts_us, amplitude } => {
+                    let first = self
+                        .amplitude_pairer
+                        .as_mut()
+                        .and_then(|amp| amp.push_b(ts_us, amplitude));
+                    self.depth_with_amplitude(first)
+                }
                 NodeMsg::Rgb { ts_us, rgb } => self.pairer.push_b(ts_us, rgb),
                 NodeMsg::Bad { reason } => {
                     let frame_id = self.next_index;
