@@ -13,6 +13,8 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+from dear_train.stats import Summary
+
 SIGMAS = (2, 4, 6)
 
 # The paper's relative improvements (Qiu et al., ICCV 2019).
@@ -214,10 +216,9 @@ def criterion_seconds(root: Path, name: str) -> tuple[float, float] | None:
     if not path.is_file():
         return None
     sample = json.loads(path.read_text())
-    per_iter = sorted(t / n * 1e-9 for t, n in zip(sample["times"], sample["iters"], strict=True))
-    return per_iter[len(per_iter) // 2], per_iter[
-        min(len(per_iter) - 1, round(0.95 * len(per_iter)))
-    ]
+    # Nearest rank, the one definition of a reported percentile (dear_train.stats, dear-stats).
+    s = Summary.of(t / n * 1e-9 for t, n in zip(sample["times"], sample["iters"], strict=True))
+    return None if s is None else (s.p50, s.p95)
 
 
 def table_latency(criterion: Path, onnxruntime: Path, interval: int) -> list[str]:

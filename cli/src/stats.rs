@@ -2,6 +2,9 @@
 //!
 //! Pure: it sees headers and receive times, never a clock or a socket, so the numbers are
 //! testable by hand. [`Window::push`] each received frame, [`Window::report`] once a second.
+//!
+//! "Median" is `dear_stats`'s nearest-rank 0.5-percentile (the lower middle value for an even
+//! count), the same definition as the daemon's log and the soak client.
 
 use std::fmt;
 use std::time::Duration;
@@ -235,18 +238,11 @@ pub fn flag_names(bits: u32) -> Vec<&'static str> {
     .collect()
 }
 
-/// The median (mean of the middle two for an even count); `None` for no values.
+/// The median ([`dear_stats::median`]: nearest rank, the lower middle value for an even
+/// count); `None` for no values.
 pub fn median(mut values: Vec<f64>) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    values.sort_unstable_by(f64::total_cmp);
-    let n = values.len();
-    Some(if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    })
+    dear_stats::sort(&mut values);
+    dear_stats::median(&values)
 }
 
 fn latency(values: impl Iterator<Item = f64>) -> Option<Latency> {
@@ -345,19 +341,12 @@ mod tests {
     }
 
     #[test]
-    fn medians_by_hand() {
-        assert_eq!(median(vec![]), None);
-        assert_eq!(median(vec![3.0]), Some(3.0));
-        assert_eq!(median(vec![5.0, 1.0, 3.0]), Some(3.0));
-        assert_eq!(median(vec![4.0, 1.0, 3.0, 2.0]), Some(2.5));
-    }
-
-    #[test]
     fn one_second_of_frames() {
         let mut w = Window::default();
-        // End-to-end: 2, 4, 9, 3 ms → sorted 2 3 4 9 → median 3.5, max 9.
-        // Total: 10, 30, 20, 40 ms → median 25, max 40.
-        // Flow: run on frames 0 and 2 only (5 ms, 8 ms) → median 6.5; fuse never → None.
+        // Medians are nearest rank: the lower middle value of an even count.
+        // End-to-end: 2, 4, 9, 3 ms → sorted 2 3 4 9 → median 3, max 9.
+        // Total: 10, 30, 20, 40 ms → median 20, max 40.
+        // Flow: run on frames 0 and 2 only (5 ms, 8 ms) → median 5; fuse never → None.
         let frames = [
             (header(10, 1_000_000_000, 10_000, 5_000), 1_002_000_000),
             (header(11, 1_100_000_000, 30_000, 0), 1_104_000_000),
@@ -372,13 +361,13 @@ mod tests {
         assert!((r.fps - 8.0).abs() < 1e-9);
         assert_eq!(r.frame_id, Some(13));
         let e2e = r.end_to_end.unwrap();
-        assert!((e2e.median_ms - 3.5).abs() < 1e-9, "{e2e:?}");
+        assert!((e2e.median_ms - 3.0).abs() < 1e-9, "{e2e:?}");
         assert!((e2e.max_ms - 9.0).abs() < 1e-9);
         let total = r.daemon_total.unwrap();
-        assert!((total.median_ms - 25.0).abs() < 1e-9);
+        assert!((total.median_ms - 20.0).abs() < 1e-9);
         assert!((total.max_ms - 40.0).abs() < 1e-9);
         let stage = |name: &str| r.stages.iter().find(|s| s.stage == name).unwrap().median_ms;
-        assert_eq!(stage("flow"), Some(6.5));
+        assert_eq!(stage("flow"), Some(5.0));
         assert_eq!(stage("capture"), Some(0.1));
         assert_eq!(stage("fuse"), None);
         assert!(r.stages.iter().all(|s| s.stage != "total"));

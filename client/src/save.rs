@@ -63,12 +63,10 @@ fn is_valid(z: f32) -> bool {
 /// pixels do not squeeze the whole scene into one colour. `None` when no pixel is valid.
 pub fn auto_depth_range(depth: ArrayView2<f32>) -> Option<(f32, f32)> {
     let mut valid: Vec<f32> = depth.iter().copied().filter(|&z| is_valid(z)).collect();
-    if valid.is_empty() {
-        return None;
-    }
-    valid.sort_unstable_by(f32::total_cmp);
-    let at = |q: f64| valid[((valid.len() - 1) as f64 * q).round() as usize];
-    Some((at(0.01), at(0.99)))
+    // Nearest rank, as every reported percentile (`dear_stats`).
+    dear_stats::sort(&mut valid);
+    let at = |q| dear_stats::percentile_nearest_rank(&valid, q);
+    Some((at(0.01)?, at(0.99)?))
 }
 
 /// The range actually used for colouring: a usable `range` as given (reversed bounds are

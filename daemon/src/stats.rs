@@ -1,5 +1,6 @@
 //! Live statistics of the daemon: frame rate, per-stage latency percentiles and the skipped /
-//! dropped counters, logged every `stats_interval_s`.
+//! dropped counters, logged every `stats_interval_s`. Median and p95 are `dear_stats`'s
+//! nearest-rank percentiles, the definition `dear watch` and the soak client print too.
 
 use std::time::{Duration, Instant};
 
@@ -80,16 +81,11 @@ pub fn summarize(latencies: &[[u32; 8]], frames: u64, elapsed: Duration) -> Inte
         if values.is_empty() {
             continue;
         }
-        values.sort_unstable();
-        stages.push((stage, percentile(&values, 0.5), percentile(&values, 0.95)));
+        dear_stats::sort(&mut values);
+        let at = |q| dear_stats::percentile_nearest_rank(&values, q).expect("non-empty");
+        stages.push((stage, at(0.5), at(0.95)));
     }
     IntervalReport { fps, stages }
-}
-
-/// Nearest-rank percentile of sorted values (`q` in [0, 1]).
-pub fn percentile(sorted: &[u32], q: f64) -> u32 {
-    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
-    sorted[rank - 1]
 }
 
 impl std::fmt::Display for IntervalReport {
@@ -111,14 +107,6 @@ impl std::fmt::Display for IntervalReport {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn percentiles_are_nearest_rank() {
-        let v: Vec<u32> = (1..=20).collect();
-        assert_eq!(percentile(&v, 0.5), 10);
-        assert_eq!(percentile(&v, 0.95), 19);
-        assert_eq!(percentile(&[7], 0.95), 7);
-    }
 
     #[test]
     fn summary_skips_stages_that_did_not_run() {

@@ -82,7 +82,8 @@ impl StaticAligner {
     }
 }
 
-/// Median of the valid (positive, finite) depths, on a subsample (every 7th pixel in row-major
+/// Median of the valid (positive, finite) depths, the upper middle one for an even count
+/// ([`dear_stats::upper_median`], a selection), on a subsample (every 7th pixel in row-major
 /// order) for speed; `values` is the reused buffer for it.
 fn median_valid_depth(depth: ArrayView2<f32>, values: &mut Vec<f32>) -> Option<f32> {
     values.clear();
@@ -91,12 +92,7 @@ fn median_valid_depth(depth: ArrayView2<f32>, values: &mut Vec<f32>) -> Option<f
         Some(d) => values.extend(d.iter().step_by(7).copied().filter(valid)),
         None => values.extend(depth.iter().step_by(7).copied().filter(valid)),
     }
-    if values.is_empty() {
-        return None;
-    }
-    let mid = values.len() / 2;
-    let (_, m, _) = values.select_nth_unstable_by(mid, f32::total_cmp);
-    Some(*m)
+    dear_stats::upper_median(values)
 }
 
 #[cfg(test)]

@@ -56,19 +56,16 @@ impl PerturbMode {
     }
 }
 
-/// Median of the valid (`> 0`) values; `None` if there are none.
+/// Median of the valid (`> 0`) values, the upper middle one for an even count
+/// ([`dear_stats::upper_median`]: the perturbation's scale, not a reported figure; a data set's
+/// perturbations depend on it); `None` if there are none.
 pub fn median_valid(depth: &ndarray::Array2<f32>) -> Option<f64> {
     let mut v: Vec<f32> = depth
         .iter()
         .copied()
         .filter(|&z| dear_pipeline::is_valid_depth(z))
         .collect();
-    if v.is_empty() {
-        return None;
-    }
-    let mid = v.len() / 2;
-    v.select_nth_unstable_by(mid, f32::total_cmp);
-    Some(v[mid] as f64)
+    dear_stats::upper_median(&mut v).map(f64::from)
 }
 
 /// Draws the perturbation of frame `frame` (keyed by `(seed, frame)`).

@@ -12,15 +12,10 @@ use dear_pipeline::RgbdFrame;
 use image::{imageops, RgbImage};
 use ndarray::Array2;
 
-/// The `q`-quantile of the values passing `keep`.
+/// The `q`-quantile of the values passing `keep` (nearest rank, [`dear_stats`]).
 fn quantile(a: &Array2<f32>, q: f64, keep: impl Fn(f32) -> bool) -> Option<f32> {
     let mut v: Vec<f32> = a.iter().copied().filter(|&x| keep(x)).collect();
-    if v.is_empty() {
-        return None;
-    }
-    let i = ((v.len() - 1) as f64 * q).round() as usize;
-    v.select_nth_unstable_by(i, f32::total_cmp);
-    Some(v[i])
+    dear_stats::select_percentile(&mut v, q)
 }
 
 fn map_image(a: &Array2<f32>, f: impl Fn(f32) -> [u8; 3]) -> RgbImage {

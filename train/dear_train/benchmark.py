@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import time
 from pathlib import Path
 
 import numpy as np
+
+from dear_train.stats import Summary
 
 
 def _input(name: str, shape: tuple[int, ...], rng: np.random.Generator) -> np.ndarray:
@@ -64,9 +65,10 @@ def main(argv: list[str] | None = None) -> None:
             for i in graph["inputs"]
         }
         for threads in args.threads:
-            seconds = sorted(time_graph(args.bundle / graph["file"], inputs, threads, args.runs))
-            p95 = seconds[min(len(seconds) - 1, round(0.95 * (len(seconds) - 1)))]
-            median = statistics.median(seconds)
+            # Nearest rank, as the Rust figures (dear_train.stats, crate dear-stats).
+            s = Summary.of(time_graph(args.bundle / graph["file"], inputs, threads, args.runs))
+            assert s is not None, "--runs must be at least 1"
+            median, p95 = s.p50, s.p95
             print(f"{name:8s} {threads:7d}  {1e3 * median:9.1f}  {1e3 * p95:6.1f}")
             rows.append({"graph": name, "threads": threads, "median_s": median, "p95_s": p95})
     if args.json:

@@ -33,7 +33,8 @@ pub struct MethodReport {
     pub aepe_px: Option<f64>,
     /// The same for the rough (network) flow, for methods that have one.
     pub aepe_rough_px: Option<f64>,
-    /// Median seconds per frame.
+    /// Median seconds per frame ([`dear_stats::median`]: nearest rank, the lower middle frame
+    /// for an even count).
     pub median_seconds: f64,
 }
 
@@ -100,7 +101,7 @@ impl Evaluation {
             .iter()
             .map(|(name, acc)| {
                 let mut seconds = acc.seconds.clone();
-                seconds.sort_by(f64::total_cmp);
+                dear_stats::sort(&mut seconds);
                 MethodReport {
                     method: name.clone(),
                     frames: acc.seconds.len(),
@@ -110,7 +111,7 @@ impl Evaluation {
                     aepe_px: (acc.aepe_frames > 0).then(|| acc.aepe_sum / acc.aepe_frames as f64),
                     aepe_rough_px: (acc.aepe_rough_frames > 0)
                         .then(|| acc.aepe_rough_sum / acc.aepe_rough_frames as f64),
-                    median_seconds: seconds.get(seconds.len() / 2).copied().unwrap_or(f64::NAN),
+                    median_seconds: dear_stats::median(&seconds).unwrap_or(f64::NAN),
                 }
             })
             .collect()

@@ -525,8 +525,7 @@ impl OnlineCalibrator {
             return 0.0;
         }
         let mut fits: Vec<f32> = self.accepted.iter().map(Measurement::fit_quality).collect();
-        fits.sort_by(f32::total_cmp);
-        let fit = fits[fits.len() / 2];
+        let fit = dear_stats::upper_median(&mut fits).expect("accepted is not empty");
         let acceptance = if self.attempts.is_empty() {
             1.0
         } else {
@@ -554,12 +553,15 @@ impl OnlineCalibrator {
     }
 }
 
-/// Per-parameter median of the measurements (upper median for an even count).
+/// Per-parameter median of the measurements (upper median for an even count,
+/// [`dear_stats::upper_median`]).
+///
+/// # Panics
+/// If `ms` is empty.
 fn median(ms: &VecDeque<Measurement>) -> Calibration {
     let pick = |f: fn(&Calibration) -> f32| {
         let mut v: Vec<f32> = ms.iter().map(|m| f(&m.calibration)).collect();
-        v.sort_by(f32::total_cmp);
-        v[v.len() / 2]
+        dear_stats::upper_median(&mut v).expect("median of no measurements")
     };
     Calibration {
         tx: pick(|c| c.tx),

@@ -140,12 +140,10 @@ fn publisher(args: &Args) {
     );
 }
 
+/// Nearest-rank median and p99 ([`dear_stats::Summary`]) in µs; NaN for no values.
 fn percentiles(values: &[u64]) -> (f64, f64) {
-    if values.is_empty() {
-        return (f64::NAN, f64::NAN);
+    match dear_stats::Summary::of(&mut values.to_vec()) {
+        Some(s) => (s.p50 as f64 / 1e3, s.p99 as f64 / 1e3),
+        None => (f64::NAN, f64::NAN),
     }
-    let mut v = values.to_vec();
-    v.sort_unstable();
-    let at = |q: f64| v[((q * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1] as f64 / 1e3;
-    (at(0.5), at(0.99))
 }
