@@ -92,17 +92,7 @@ impl Recorder {
     /// leaves it out when the writer is behind or has stopped on an error.
     pub fn offer(&mut self, frame: &RgbdFrame) {
         let Some(tx) = &self.tx else { return };
-        let copy = Box::new(RgbdFrame {
-            index: frame.index,
-            timestamp_ns: frame.timestamp_ns,
-            rgb: frame.rgb.clone(),
-            amplitude: frame.amplitude.clone(),
-            depth: frame.depth.clone(),
-            gt_depth: None,
-            mask: None,
-            flow: None,
-            perturbation: None,
-        });
+        let copy = Box::new(frame.sensor_copy());
         match tx.try_send(copy) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) => {

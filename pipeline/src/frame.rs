@@ -59,6 +59,39 @@ pub struct RgbdFrame {
 }
 
 impl RgbdFrame {
+    /// A frame of sensor planes only, as a camera or a replay of its planes yields it (no
+    /// ground truth, no known perturbation).
+    pub fn sensor(
+        index: u64,
+        timestamp_ns: u64,
+        rgb: Array3<u8>,
+        amplitude: Array2<f32>,
+        depth: Array2<f32>,
+    ) -> Self {
+        RgbdFrame {
+            index,
+            timestamp_ns,
+            rgb,
+            amplitude,
+            depth,
+            gt_depth: None,
+            mask: None,
+            flow: None,
+            perturbation: None,
+        }
+    }
+
+    /// A copy of the sensor planes (ground truth and perturbation left out).
+    pub fn sensor_copy(&self) -> Self {
+        RgbdFrame::sensor(
+            self.index,
+            self.timestamp_ns,
+            self.rgb.clone(),
+            self.amplitude.clone(),
+            self.depth.clone(),
+        )
+    }
+
     /// `(height, width)`.
     pub fn dim(&self) -> (usize, usize) {
         self.depth.dim()

@@ -78,15 +78,5 @@ pub fn frame(i: u64, w: usize, h: usize) -> RgbdFrame {
             0.0
         }
     });
-    RgbdFrame {
-        index: i,
-        timestamp_ns: i * 33_333_333,
-        rgb,
-        amplitude,
-        depth,
-        gt_depth: None,
-        mask: None,
-        flow: None,
-        perturbation: None,
-    }
+    RgbdFrame::sensor(i, i * 33_333_333, rgb, amplitude, depth)
 }

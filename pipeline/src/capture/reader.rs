@@ -98,15 +98,8 @@ impl CaptureDir {
         let amplitude = png::read_u16(&paths.amplitude, size)?.mapv(f32::from);
         let depth = png::read_depth(&paths.depth, size, scale)?;
         Ok(RgbdFrame {
-            index: entry.id,
-            timestamp_ns: entry.timestamp_ns,
-            rgb,
-            amplitude,
-            depth,
-            gt_depth: None,
-            mask: None,
-            flow: None,
             perturbation: entry.perturbation,
+            ..RgbdFrame::sensor(entry.id, entry.timestamp_ns, rgb, amplitude, depth)
         })
     }
 }
