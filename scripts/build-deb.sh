@@ -58,9 +58,10 @@ for arch in "${arches[@]}"; do
             deb=$(cargo deb -p deard --no-build --strip --quiet -o "$out")
             ;;
         arm64)
-            echo "build-deb: cargo build --release --target $triple (deard, dear) in $a64_target_dir"
-            CARGO_TARGET_DIR=$a64_target_dir cargo build --release --quiet --target "$triple" \
-                -p deard -p dear-cli --bin deard --bin dear
+            # The build scripts/test-aarch64.sh tests (the same invocation, so nothing is built
+            # twice when both run).
+            echo "build-deb: scripts/test-aarch64.sh --build-only (deard, dear for $triple in $a64_target_dir)"
+            DEAR_AARCH64_TARGET_DIR=$a64_target_dir scripts/test-aarch64.sh --build-only
             deb=$(CARGO_TARGET_DIR=$a64_target_dir \
                 cargo deb -p deard --no-build --strip --quiet --target "$triple" -o "$out")
             ;;

@@ -2,9 +2,12 @@
 # Tests the workspace as 64-bit ARM binaries (aarch64-unknown-linux-gnu), cross-built here and
 # run under qemu-user (issue 18): what a Raspberry Pi 4/5, Jetson or i.MX 8 board would run.
 #
-# 1. Cross-build, release: deard and dear, the example chain_depth (cli/examples), and the
-#    unit tests of dear-pipeline (geometry, the classical filter, calibration, the online
-#    estimator, the bundle format: every test of its library).
+# 1. Cross-build, release: deard and dear, chain_depth (tests/src/bin), and the unit tests of
+#    dear-pipeline (geometry, the classical filter, calibration, the online estimator, the
+#    bundle format: every test of its library). The two cargo invocations select packages so
+#    that every dependency gets the same features in both (dear-pipeline's dev-dependencies
+#    through one of its examples in the first): tract and the rest are compiled once, not once
+#    per invocation (which took a third of the build).
 # 2. Those unit tests under qemu-aarch64.
 # 3. The shipped bundle (models/edge) through tract on aarch64: chain_depth runs the paper's
 #    chain on frames of samples/demo natively and under qemu; the depth must agree within
@@ -21,8 +24,11 @@
 #
 # The aarch64 build has a target directory of its own, target/aarch64 (or
 # $DEAR_AARCH64_TARGET_DIR), so it neither rebuilds nor locks target/; the native chain_depth
-# builds in target/release. A cold aarch64 build takes about 12 minutes on 2 cores.
-# Needs: scripts/setup.sh --aarch64.
+# builds in target/release with the features of the release deard and dear (nothing else is
+# rebuilt there). Needs: scripts/setup.sh --aarch64.
+#
+#   scripts/test-aarch64.sh               all of the above
+#   scripts/test-aarch64.sh --build-only  only the aarch64 deard and dear (scripts/build-deb.sh)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -37,6 +43,12 @@ a64_target_dir=${DEAR_AARCH64_TARGET_DIR:-target/aarch64}
 a64=$a64_target_dir/$triple/release
 qemu=(qemu-aarch64 -L "$sysroot")
 frames=${DEAR_AARCH64_FRAMES:-3}
+build_only=false
+case "${1:-}" in
+    "") ;;
+    --build-only) build_only=true ;;
+    *) fail "unknown option $1 (expected --build-only or nothing)" ;;
+esac
 
 rustup target list --installed | grep -qx "$triple" \
     || fail "the Rust target $triple is not installed (scripts/setup.sh --aarch64)"
@@ -52,21 +64,39 @@ a64_cargo() { CARGO_TARGET_DIR=$a64_target_dir cargo "$@" --release --target "$t
 # --- 1. cross-build -------------------------------------------------------------------------
 step "cross-build for $triple in $a64_target_dir (release): deard, dear, chain_depth, dear-pipeline's unit tests"
 t=$(now)
-a64_cargo build --quiet -p deard -p dear-cli --bin deard --bin dear --example chain_depth
-# The library's test executable, built now so that step 2 times only the run.
-a64_cargo test --quiet -p dear-pipeline --lib --no-run 2>"$a64_target_dir/test-build.log" \
-    || fail "building dear-pipeline's unit tests for $triple failed: $(cat "$a64_target_dir/test-build.log")"
+a64_cargo build --quiet -p deard -p dear-cli -p dear-e2e-tests -p dear-pipeline \
+    --bin deard --bin dear --bin chain_depth --example write_geometry_fixtures
+if $build_only; then
+    echo "cross-build: $(since "$t")"
+    exit 0
+fi
+# The library's test executable (the same packages' libraries, for the same features).
+mkdir -p "$a64_target_dir"
+a64_cargo test --quiet --no-run --message-format=json \
+    -p dear-pipeline -p deard -p dear-cli -p dear-e2e-tests --lib \
+    >"$a64_target_dir/test-build.json" 2>"$a64_target_dir/test-build.log" \
+    || fail "building the unit tests for $triple failed: $(cat "$a64_target_dir/test-build.log")"
+unit_tests=$(python3 -c '
+import json, sys
+for line in open(sys.argv[1]):
+    m = json.loads(line)
+    if m.get("reason") == "compiler-artifact" and m["target"]["name"] == "dear_pipeline" \
+            and m["profile"]["test"] and m.get("executable"):
+        print(m["executable"])
+' "$a64_target_dir/test-build.json")
+[ -x "$unit_tests" ] || fail "no dear-pipeline unit test executable in $a64_target_dir/test-build.json"
 echo "cross-build: $(since "$t")"
-for bin in deard dear examples/chain_depth; do
+for bin in deard dear chain_depth; do
     machine=$(od -An -tu2 -j18 -N2 "$a64/$bin" | tr -d ' ')
     [ "$machine" = 183 ] || fail "$a64/$bin is not an aarch64 executable (ELF machine $machine)"
 done
 
 # --- 2. unit tests under qemu ---------------------------------------------------------------
-step "dear-pipeline unit tests under qemu-aarch64 (the runner in .cargo/config.toml)"
+step "dear-pipeline unit tests under qemu-aarch64 ($unit_tests)"
 t=$(now)
 log=$a64_target_dir/unit-tests.log
-a64_cargo test -p dear-pipeline --lib >"$log" 2>&1 \
+# From the package's directory, as cargo test runs them.
+(cd pipeline && "${qemu[@]}" "$unit_tests") >"$log" 2>&1 \
     || fail "dear-pipeline's unit tests failed under qemu: $(grep -E '^test .*FAILED|panicked|^error' "$log" | head -20) (log: $log)"
 grep '^test result:' "$log"
 grep -q '^test result: ok\. [1-9][0-9]* passed; 0 failed' "$log" \
@@ -92,14 +122,15 @@ cleanup() {
 trap cleanup EXIT
 
 step "models/edge on $frames frames of samples/demo: x86-64 native against aarch64 under qemu"
-cargo build --release --quiet -p dear-cli --example chain_depth
-native=target/release/examples/chain_depth
+cargo build --release --quiet -p deard -p dear-cli -p dear-e2e-tests \
+    --bin deard --bin dear --bin chain_depth
+native=target/release/chain_depth
 chain_args=(run --bundle models/edge --capture samples/demo --frames "$frames")
 t=$(now)
 "$native" "${chain_args[@]}" --out "$scratch/x86_64.depth" | sed 's/^/x86-64: /'
 echo "x86-64 native: $(since "$t")"
 t=$(now)
-"${qemu[@]}" "$a64/examples/chain_depth" "${chain_args[@]}" --out "$scratch/aarch64.depth" \
+"${qemu[@]}" "$a64/chain_depth" "${chain_args[@]}" --out "$scratch/aarch64.depth" \
     | sed 's/^/aarch64 (qemu): /'
 echo "aarch64 under qemu: $(since "$t")"
 "$native" compare "$scratch/x86_64.depth" "$scratch/aarch64.depth" --tolerance-mm 1 \

@@ -1,10 +1,11 @@
 //! `chain_depth`: the DEAR chain's output depth on frames of a capture, written to a file, and
-//! the comparison of two such files. `scripts/test-aarch64.sh` runs it natively and as an
+//! the comparison of two such files (a bin of the end-to-end tests crate, so that it builds with
+//! the features of `deard` and `dear` and shares their compiled dependencies). `scripts/test-aarch64.sh` runs it natively and as an
 //! aarch64 binary under qemu-user on the same frames and bundle, then compares: tract's ARM
 //! kernels must give the same depth as the x86 ones (issue 18).
 //!
 //! ```text
-//! cargo run --release -p dear-cli --example chain_depth -- \
+//! cargo run --release -p dear-e2e-tests --bin chain_depth -- \
 //!     run --bundle models/edge --capture samples/demo --frames 3 --out x86.depth
 //! chain_depth compare x86.depth arm.depth --tolerance-mm 1
 //! ```
@@ -25,7 +26,6 @@ use std::fs;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, ensure, Context};
 use clap::{Parser, Subcommand};
 use dear_pipeline::capture::CaptureDir;
 use dear_pipeline::evaluate::BundleMethod;
@@ -33,6 +33,25 @@ use dear_pipeline::is_valid_depth;
 use dear_pipeline::model::ModelBundle;
 
 const MAGIC: &[u8; 8] = b"DEARDPT1";
+
+/// Errors are messages: each names the file or frame and what is wrong.
+type Result<T> = std::result::Result<T, String>;
+
+/// Returns the formatted message as the error.
+macro_rules! bail {
+    ($($message:tt)*) => {
+        return Err(format!($($message)*))
+    };
+}
+
+/// Returns the formatted message as the error unless the condition holds.
+macro_rules! ensure {
+    ($condition:expr, $($message:tt)*) => {
+        if !$condition {
+            bail!($($message)*);
+        }
+    };
+}
 
 #[derive(Parser)]
 #[command(about = "The DEAR chain's depth on a capture's frames, and comparing two runs")]
@@ -76,8 +95,8 @@ struct DepthFile {
     frames: Vec<(u64, Vec<f32>)>,
 }
 
-fn main() -> anyhow::Result<()> {
-    match Args::parse().command {
+fn main() {
+    let outcome = match Args::parse().command {
         Command::Run {
             bundle,
             capture,
@@ -88,22 +107,24 @@ fn main() -> anyhow::Result<()> {
             reference,
             other,
             tolerance_mm,
-        } => {
-            if compare(&reference, &other, tolerance_mm)? {
-                Ok(())
-            } else {
+        } => compare(&reference, &other, tolerance_mm).map(|within| {
+            if !within {
                 std::process::exit(1)
             }
-        }
+        }),
+    };
+    if let Err(message) = outcome {
+        eprintln!("chain_depth: {message}");
+        std::process::exit(2);
     }
 }
 
-fn run(bundle_dir: &Path, capture_dir: &Path, count: usize, out: &Path) -> anyhow::Result<()> {
+fn run(bundle_dir: &Path, capture_dir: &Path, count: usize, out: &Path) -> Result<()> {
     ensure!(count > 0, "--frames must be at least 1");
     let bundle = ModelBundle::load(bundle_dir)
-        .with_context(|| format!("cannot load the bundle {}", bundle_dir.display()))?;
+        .map_err(|e| format!("cannot load the bundle {}: {e}", bundle_dir.display()))?;
     let capture = CaptureDir::open(capture_dir)
-        .with_context(|| format!("cannot open the capture {}", capture_dir.display()))?;
+        .map_err(|e| format!("cannot open the capture {}: {e}", capture_dir.display()))?;
     ensure!(
         !capture.is_empty(),
         "{}: the capture has no frames",
@@ -112,7 +133,7 @@ fn run(bundle_dir: &Path, capture_dir: &Path, count: usize, out: &Path) -> anyho
     let (w, h) = capture.size();
     let (width, height) = (w as usize, h as usize);
     let mut chain = BundleMethod::new(&bundle, "chain", height, width)
-        .with_context(|| format!("cannot build the chain of {}", bundle_dir.display()))?;
+        .map_err(|e| format!("cannot build the chain of {}: {e}", bundle_dir.display()))?;
 
     let count = count.min(capture.len());
     let mut bytes = Vec::with_capacity(20 + count * (8 + 4 * width * height));
@@ -122,13 +143,16 @@ fn run(bundle_dir: &Path, capture_dir: &Path, count: usize, out: &Path) -> anyho
     }
     let started = Instant::now();
     for position in (0..count).map(|i| i * capture.len() / count) {
-        let frame = capture.read_sensor_frame(position).with_context(|| {
-            format!("cannot read frame {position} of {}", capture_dir.display())
+        let frame = capture.read_sensor_frame(position).map_err(|e| {
+            format!(
+                "cannot read frame {position} of {}: {e}",
+                capture_dir.display()
+            )
         })?;
         let frame_start = Instant::now();
         let out = chain
             .run(&frame)
-            .with_context(|| format!("the chain failed on frame {}", frame.index))?;
+            .map_err(|e| format!("the chain failed on frame {}: {e}", frame.index))?;
         let valid = out
             .refined
             .depth
@@ -152,12 +176,12 @@ fn run(bundle_dir: &Path, capture_dir: &Path, count: usize, out: &Path) -> anyho
         "{count} frames of {width}x{height} in {:.1} s",
         started.elapsed().as_secs_f64()
     );
-    fs::write(out, &bytes).with_context(|| format!("cannot write {}", out.display()))?;
+    fs::write(out, &bytes).map_err(|e| format!("cannot write {}: {e}", out.display()))?;
     Ok(())
 }
 
-fn read(path: &Path) -> anyhow::Result<DepthFile> {
-    let bytes = fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+fn read(path: &Path) -> Result<DepthFile> {
+    let bytes = fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
     if bytes.len() < 20 || &bytes[..8] != MAGIC {
         bail!(
             "{}: not a chain_depth file (it does not start with {:?})",
@@ -194,7 +218,7 @@ fn read(path: &Path) -> anyhow::Result<DepthFile> {
 }
 
 /// Prints the comparison; whether the largest difference is within the tolerance.
-fn compare(reference: &Path, other: &Path, tolerance_mm: f64) -> anyhow::Result<bool> {
+fn compare(reference: &Path, other: &Path, tolerance_mm: f64) -> Result<bool> {
     let (a, b) = (read(reference)?, read(other)?);
     ensure!(
         (a.width, a.height, a.frames.len()) == (b.width, b.height, b.frames.len()),
