@@ -15,8 +15,8 @@
 #    tests the sandbox of the same unit): it serves, and `dear list` and `dear dump` of the
 #    package, run as another user added to group `dear`, see the service and receive 5 frames.
 #    SIGTERM stops it with exit status 0.
-# 4. dpkg --purge: the files, the configuration and the enablement are gone; the user and the
-#    group stay (Debian keeps system users), and this test removes them.
+# 4. dpkg --purge: the files, the configuration, the enablement and the state are gone; the
+#    user and the group stay (Debian keeps system users), and this test removes them.
 #
 # Runs as root on a machine where deard is not installed (no package, no user deard, no group
 # dear, no /run/deard), and leaves it so, also on failure. About 30 s.
@@ -101,6 +101,7 @@ getent passwd deard >/dev/null && fail "user deard exists: deard looks installed
 getent group dear >/dev/null && fail "group dear exists: deard looks installed here"
 [ ! -e /run/deard ] || fail "/run/deard exists: a deard service looks present here"
 [ ! -e /etc/deard ] || fail "/etc/deard exists: deard looks installed here"
+[ ! -e /var/lib/deard ] || fail "/var/lib/deard exists: deard looks installed here"
 app_user=dear-test-pkg-app
 getent passwd "$app_user" >/dev/null && fail "user $app_user exists (a previous run's?): userdel it"
 
@@ -112,7 +113,7 @@ cleanup() {
         wait "$daemon_pid" 2>/dev/null || true
     fi
     if dpkg -s deard >/dev/null 2>&1; then dpkg --purge deard >/dev/null 2>&1 || true; fi
-    rm -rf /run/deard /etc/deard
+    rm -rf /run/deard /etc/deard /var/lib/deard
     for u in "$app_user" deard; do
         getent passwd "$u" >/dev/null && userdel "$u"
     done
@@ -183,8 +184,14 @@ supplementary=$(unit_value SupplementaryGroups)
 environment=$(unit_value Environment)
 runtime_dir=/run/$(unit_value RuntimeDirectory)
 runtime_mode=$(unit_value RuntimeDirectoryMode)
+state=$(unit_value StateDirectory)
+state_mode=$(unit_value StateDirectoryMode)
 [ "$user:$group" = deard:dear ] || fail "the unit runs as $user:$group, not deard:dear"
+# What systemd does for RuntimeDirectory= and StateDirectory=.
 install -d -m "${runtime_mode:-0755}" -o "$user" -g "$group" "$runtime_dir"
+if [ -n "$state" ]; then
+    install -d -m "${state_mode:-0755}" -o "$user" -g "$group" "/var/lib/$state"
+fi
 groups_arg=()
 if [ -n "$supplementary" ]; then groups_arg=(--groups "$(tr ' ' ',' <<<"$supplementary")"); fi
 step "ExecStart=$exec_start as $user:$group, $environment"
@@ -234,8 +241,8 @@ step "dpkg --purge deard"
 dpkg --purge deard >"$scratch/dpkg-purge.log" 2>&1 \
     || fail "dpkg --purge failed: $(cat "$scratch/dpkg-purge.log")"
 for p in /usr/bin/deard /usr/bin/dear /usr/share/deard /usr/share/doc/deard /etc/deard "$unit" \
-        "$wants" /run/deard; do
+        "$wants" /run/deard /var/lib/deard; do
     if [ -e "$p" ] || [ -L "$p" ]; then fail "$p is left after dpkg --purge"; fi
 done
 getent passwd deard >/dev/null || fail "the purge removed the user deard (Debian keeps system users)"
-echo "purged: files, configuration, enablement and /run/deard gone; user deard and group dear kept"
+echo "purged: files, configuration, enablement, /run/deard and /var/lib/deard gone; user deard and group dear kept"

@@ -55,3 +55,19 @@ for mode in self-test deard; do
     fi
     grep -E '^(ok|FAILED|self-test|deard-live|test-v4l2-vm):' "target/v4l2-vm-$mode.log" || true
 done
+
+# The board tier (issue 18): the workspace cross-built for aarch64 (64-bit ARM boards) and
+# tested under qemu-user — dear-pipeline's unit tests, the shipped bundle's depth against
+# x86-64's, a daemon + client exchange over shared memory — then the Debian packages for amd64
+# and arm64 (the arm64 one from the same release build in target/aarch64), installed, run and
+# purged here when root. About 14 minutes on 2 cores, 12 of them the cold aarch64 build.
+echo "== aarch64 under emulation (scripts/test-aarch64.sh)"
+scripts/test-aarch64.sh
+echo "== Debian packages (scripts/build-deb.sh)"
+scripts/build-deb.sh
+if [ "$(id -u)" = 0 ]; then
+    echo "== Debian packages installed and run (scripts/test-deb.sh)"
+    scripts/test-deb.sh
+else
+    echo "== Debian packages installed and run: skipped (needs root; run sudo scripts/test-deb.sh)"
+fi
