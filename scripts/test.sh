@@ -42,8 +42,9 @@ fi
 
 # The live-capture tier (issue 14): the kernel's own V4L2 — vivid in a qemu VM (TCG, no KVM;
 # the kernel package is cached under ~/.cache/dear/v4l2-vm) — first the driver alone, then
-# deard capturing two vivid nodes with a client checking the depth it receives, through a
-# device loss. About a minute warm, plus the release build of the three binaries.
+# deard capturing vivid nodes (depth, RGB, amplitude) with a client checking the depth it
+# receives, through a device loss, and from a replay of its recording. About a minute warm,
+# plus the release build of the three binaries.
 echo "== V4L2 in a VM (scripts/test-v4l2-vm.sh --self-test, --deard)"
 cargo build --release --quiet -p deard -p dear-cli -p dear-e2e-tests \
     --bin deard --bin dear --bin dear-v4l-check
