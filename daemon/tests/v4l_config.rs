@@ -148,3 +148,28 @@ fn a_missing_module_stops_the_daemon_naming_the_file_or_the_node() {
         "{err}"
     );
 }
+
+/// The README's module examples (RealSense-like, Arducam-like) are configurations deard accepts.
+#[test]
+fn the_readme_module_examples_are_valid_configurations() {
+    let readme = include_str!("../../README.md");
+    let start = readme
+        .find("## Live capture from a ToF module")
+        .expect("README has the live capture section");
+    let section = &readme[start..];
+    let section = &section[..section[3..].find("\n## ").map_or(section.len(), |e| e + 3)];
+    let blocks: Vec<&str> = section
+        .split("```toml\n")
+        .skip(1)
+        .map(|b| &b[..b.find("```").expect("closed block")])
+        .collect();
+    assert_eq!(blocks.len(), 2, "a Z16 and a 4-phase example");
+    let formats: Vec<String> = blocks
+        .iter()
+        .map(|b| {
+            let config = Config::from_toml(b).unwrap_or_else(|e| panic!("{e}\n{b}"));
+            config.capture.v4l.expect("[capture.v4l]").tof.node.format
+        })
+        .collect();
+    assert_eq!(formats, ["Z16 ", "Y12 "]);
+}
