@@ -81,18 +81,16 @@ struct Summary {
 }
 
 impl Summary {
+    /// Nearest-rank percentiles, the project's one definition (`dear_stats`): the median is
+    /// the lower middle frame for an even count.
     fn of(values: &[f64]) -> Option<Summary> {
-        if values.is_empty() {
-            return None;
-        }
         let mut v = values.to_vec();
-        v.sort_by(f64::total_cmp);
-        let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+        let s = dear_stats::Summary::of(&mut v)?;
         Some(Summary {
-            count: v.len(),
-            median_ms: at(0.5),
-            p95_ms: at(0.95),
-            mean_ms: v.iter().sum::<f64>() / v.len() as f64,
+            count: s.count,
+            median_ms: s.p50,
+            p95_ms: s.p95,
+            mean_ms: s.mean,
         })
     }
 }
