@@ -5,12 +5,14 @@
 
 use std::path::PathBuf;
 
+#[path = "../tests/support/geometry_cases.rs"]
+mod geometry_cases;
+
 fn main() -> std::io::Result<()> {
-    let dir = std::env::args_os().nth(1).map_or_else(
-        dear_pipeline::geometry::fixtures::fixtures_dir,
-        PathBuf::from,
-    );
-    for path in dear_pipeline::geometry::fixtures::write_all(&dir)? {
+    let dir = std::env::args_os()
+        .nth(1)
+        .map_or_else(geometry_cases::fixtures_dir, PathBuf::from);
+    for path in geometry_cases::write_all(&dir)? {
         println!("wrote {}", path.display());
     }
     Ok(())

@@ -15,9 +15,7 @@
 //! - [`splat`]: forward splatting with a z-buffer, to synthesise a perturbed RGB view;
 //! - [`register`]: a live ToF image onto the RGB grid with the module's factory rotation and
 //!   intrinsics (the translation is left to the chain's calibration);
-//! - [`fixtures`]: the shared test vectors.
 
-pub mod fixtures;
 pub mod flow;
 pub mod lsq;
 pub mod register;

@@ -1,9 +1,8 @@
-//! Test vectors shared with the Python training package (`train/`), which checks its PyTorch
-//! port of this module against them.
-//!
-//! [`all_cases`] builds every case in memory; the `write_geometry_fixtures` example writes them
-//! to `fixtures/geometry/*.json`, and a unit test asserts the committed files still equal what
-//! the code computes, so neither side can drift silently. The format is described in
+//! The geometry test vectors shared with the Python training package (`train/`), which checks
+//! its PyTorch port of `dear_pipeline::geometry` against them. Test support, outside the library:
+//! included by `pipeline/tests/geometry_fixtures.rs` (the committed files still equal what the
+//! code computes, so neither side can drift silently) and by the `write_geometry_fixtures`
+//! example (which writes them to `fixtures/geometry/*.json`). The format is described in
 //! `fixtures/geometry/README.md`.
 
 use std::path::{Path, PathBuf};
@@ -11,17 +10,17 @@ use std::path::{Path, PathBuf};
 use ndarray::{Array2, Array3, ArrayBase, Data, Dimension};
 use serde_json::{json, Map, Value};
 
-use crate::calibration::Calibration;
-use crate::frame::Flow;
-use crate::geometry::lsq::{
+use dear_pipeline::geometry::lsq::{
     solve_calibration, solve_calibration_robust, CalibrationFit, RobustOptions,
 };
-use crate::geometry::surface::{DEPTH_EDGE_ABS_M, DEPTH_EDGE_REL};
-use crate::geometry::{flow_from_depth, splat, synthesize_view, warp_bilinear, warp_depth};
+use dear_pipeline::geometry::surface::{DEPTH_EDGE_ABS_M, DEPTH_EDGE_REL};
+use dear_pipeline::geometry::{flow_from_depth, splat, synthesize_view, warp_bilinear, warp_depth};
+use dear_pipeline::Calibration;
+use dear_pipeline::Flow;
 
 /// Height and width of every case.
-const H: usize = 12;
-const W: usize = 16;
+pub const H: usize = 12;
+pub const W: usize = 16;
 
 /// One fixture: the file it lives in and its JSON document.
 #[derive(Debug, Clone, PartialEq)]
@@ -211,7 +210,7 @@ fn lsq_depth() -> Array2<f32> {
     })
 }
 
-const LSQ_TRUE: Calibration = Calibration {
+pub const LSQ_TRUE: Calibration = Calibration {
     tx: 9.0,
     ty: -3.0,
     cx: 2.5,
@@ -349,95 +348,4 @@ fn synthesize_view_case() -> FixtureCase {
         json!({ "rgb": array_u8(&view.rgb), "depth": array_f32(&view.depth), "flow_u": array_f32(&view.flow.u),
                 "flow_v": array_f32(&view.flow.v), "valid": array_bool(&view.valid) }),
     )
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Structural comparison; numbers within 1e-6 relative to max(1, |x|).
-    fn assert_json_close(got: &Value, want: &Value, path: &str) {
-        match (got, want) {
-            (Value::Number(a), Value::Number(b)) => {
-                let (a, b) = (a.as_f64().unwrap(), b.as_f64().unwrap());
-                assert!(
-                    (a - b).abs() <= 1e-6 * b.abs().max(1.0),
-                    "{path}: {a} vs committed {b}"
-                );
-            }
-            (Value::Array(a), Value::Array(b)) => {
-                assert_eq!(a.len(), b.len(), "{path}: length differs");
-                for (i, (x, y)) in a.iter().zip(b).enumerate() {
-                    assert_json_close(x, y, &format!("{path}[{i}]"));
-                }
-            }
-            (Value::Object(a), Value::Object(b)) => {
-                let mut ka: Vec<_> = a.keys().collect();
-                let mut kb: Vec<_> = b.keys().collect();
-                ka.sort();
-                kb.sort();
-                assert_eq!(ka, kb, "{path}: keys differ");
-                for k in ka {
-                    assert_json_close(&a[k], &b[k], &format!("{path}.{k}"));
-                }
-            }
-            _ => assert_eq!(got, want, "{path}"),
-        }
-    }
-
-    #[test]
-    fn committed_fixtures_match_the_code() {
-        let dir = fixtures_dir();
-        for case in all_cases() {
-            let path = dir.join(case.file_name);
-            let text = std::fs::read_to_string(&path).unwrap_or_else(|e| {
-                panic!(
-                    "{}: {e}; regenerate with `cargo run -p dear-pipeline --example write_geometry_fixtures`",
-                    path.display()
-                )
-            });
-            let committed: Value =
-                serde_json::from_str(&text).expect("committed fixture is valid JSON");
-            assert_json_close(&case.json, &committed, case.file_name);
-        }
-    }
-
-    #[test]
-    fn fixtures_exercise_the_interesting_paths() {
-        let cases = all_cases();
-        let get = |name: &str| {
-            cases
-                .iter()
-                .find(|c| c.file_name == name)
-                .unwrap()
-                .json
-                .clone()
-        };
-        let count = |v: &Value, pred: &dyn Fn(&Value) -> bool| {
-            v["data"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .filter(|x| pred(x))
-                .count()
-        };
-        let wd = get("warp_depth.json");
-        // Some samples fall outside the image, most do not.
-        let zeros = count(&wd["outputs"]["out"], &|x| x.as_f64() == Some(0.0));
-        assert!(
-            zeros > 10 && zeros < H * W / 2,
-            "{zeros} invalid warp_depth outputs"
-        );
-        let wb = get("warp_bilinear.json");
-        assert!(count(&wb["outputs"]["valid"], &|x| x == &Value::Bool(false)) > 10);
-        let sv = get("synthesize_view.json");
-        let invalid = count(&sv["outputs"]["valid"], &|x| x == &Value::Bool(false));
-        assert!(
-            invalid > 5 && invalid < H * W / 3,
-            "{invalid} invalid synthesised pixels"
-        );
-        // The robust fit is closer to the truth than a plain fit of the same data would be.
-        let rc = &get("lsq_robust.json")["outputs"]["calibration"];
-        assert!((rc["cx"].as_f64().unwrap() - f64::from(LSQ_TRUE.cx)).abs() < 0.5);
-    }
 }
