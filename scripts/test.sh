@@ -16,6 +16,12 @@ if cargo tree -p dear-client -e normal --prefix none | grep -E '^(tract|clap|ind
     echo "dear-client pulls the crates above; the SDK must not" >&2
     exit 1
 fi
+# The runtime carries no evaluation harness (issue 17): deard builds dear-pipeline without the
+# `evaluate` feature.
+if cargo tree -p deard -e features --prefix none | grep -F 'dear-pipeline feature "evaluate"'; then
+    echo "deard's build includes dear-pipeline's evaluation harness; it must not" >&2
+    exit 1
+fi
 
 if [ -d train ]; then
     # Two commands, not `a && b`: errexit ignores a failure on the left of `&&`.

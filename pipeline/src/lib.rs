@@ -8,7 +8,8 @@
 //! - [`capture`]: the capture-directory format (read, validate, write);
 //! - [`geometry`]: warping, least-squares calibration, depth↔flow, forward splatting;
 //! - [`metrics`]: AEPE and the paper's quantile-split depth MAE;
-//! - [`evaluate`]: methods and metric accumulation behind `dear eval`;
+//! - [`evaluate`]: methods and metric accumulation behind `dear eval` (feature `evaluate`, not in
+//!   the daemon's build);
 //! - [`filter`]: the classical edge-aware refinement baseline;
 //! - [`model`]: model bundles (ONNX graphs + manifest) run by tract (feature `inference`);
 //! - [`dear`]: the paper's per-frame chain of networks and geometry (feature `inference`);
@@ -21,6 +22,7 @@ pub mod crossmodal;
 #[cfg(feature = "inference")]
 pub mod dear;
 pub mod direct;
+#[cfg(feature = "evaluate")]
 pub mod evaluate;
 pub mod filter;
 pub mod frame;
