@@ -41,9 +41,10 @@ pub fn describe(node: &NodeInfo) -> String {
         return out;
     }
     for f in &node.formats {
-        let role = PixelFormat::from_fourcc(&fourcc_bytes(&f.fourcc))
-            .map(role_of)
-            .unwrap_or("not decoded by deard");
+        let role = PixelFormat::ALL
+            .into_iter()
+            .find(|p| p.to_string() == f.fourcc)
+            .map_or("not decoded by deard", role_of);
         let _ = writeln!(out, "  format {:?} {} [{role}]", f.fourcc, f.description);
         for s in &f.sizes {
             let _ = writeln!(out, "    {s}");
@@ -63,21 +64,13 @@ pub fn describe(node: &NodeInfo) -> String {
     out
 }
 
-fn fourcc_bytes(text: &str) -> [u8; 4] {
-    let mut b = [b' '; 4];
-    for (o, c) in b.iter_mut().zip(text.bytes()) {
-        *o = c;
-    }
-    b
-}
-
 /// Which `[capture.v4l]` node a format can feed.
 fn role_of(format: PixelFormat) -> &'static str {
     match format {
         PixelFormat::Z16 => "tof depth",
-        PixelFormat::Y16 => "tof depth",
+        PixelFormat::Y16 => "tof depth or amplitude",
         PixelFormat::Y12 | PixelFormat::Y12P => "tof 4-phase",
-        PixelFormat::Grey => "amplitude only: not used yet",
+        PixelFormat::Grey => "amplitude",
         PixelFormat::Yuyv | PixelFormat::Nv12 | PixelFormat::Rgb3 | PixelFormat::Mjpg => "rgb",
     }
 }
@@ -124,7 +117,7 @@ mod tests {
         let text = describe(&node);
         assert_eq!(
             text,
-            "/dev/video0: vivid (vivid, platform:vivid-000)\n  format \"Y16 \" 16-bit Greyscale [tof depth]\n    640x480 (25 fps)\n  format \"HSV3\" 24-bit HSV [not decoded by deard]\n  controls:\n    brightness (integer) 0..=255 step 1 default 128\n\n"
+            "/dev/video0: vivid (vivid, platform:vivid-000)\n  format \"Y16 \" 16-bit Greyscale [tof depth or amplitude]\n    640x480 (25 fps)\n  format \"HSV3\" 24-bit HSV [not decoded by deard]\n  controls:\n    brightness (integer) 0..=255 step 1 default 128\n\n"
         );
     }
 }

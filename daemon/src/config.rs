@@ -133,6 +133,13 @@ pub struct CaptureConfig {
     pub record: Option<PathBuf>,
 }
 
+impl CaptureConfig {
+    /// The live module's tables when the source is `"v4l"` (validation made sure they exist).
+    pub fn live(&self) -> Option<&V4lConfig> {
+        self.v4l.as_ref().filter(|_| self.source == "v4l")
+    }
+}
+
 /// A live ToF RGB-D module: two V4L2 capture nodes paired by timestamp, registered onto the RGB
 /// grid with the module's calibration file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -74,9 +74,9 @@ pub enum RunError {
 /// Returns the final statistics, or an error if it cannot start or the source fails (e.g. no
 /// frame of a replay can be read).
 pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError> {
-    let source: Box<dyn FrameSource> = match &config.capture.v4l {
-        Some(v4l) if config.capture.source == "v4l" => Box::new(V4lSource::open(v4l)?),
-        _ => Box::new(ReplaySource::open(&config.capture)?),
+    let source: Box<dyn FrameSource> = match config.capture.live() {
+        Some(v4l) => Box::new(V4lSource::open(v4l)?),
+        None => Box::new(ReplaySource::open(&config.capture)?),
     };
     let (width, height) = source.size();
     let restored = match (
@@ -95,11 +95,9 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         None => {
             let calibration = source.initial_calibration();
             check_calibration_fits(
-                &match &config.capture.v4l {
-                    Some(v4l) if config.capture.source == "v4l" => {
-                        format!("{}: initial calibration", v4l.calibration.display())
-                    }
-                    _ => format!(
+                &match config.capture.live() {
+                    Some(v4l) => format!("{}: initial calibration", v4l.calibration.display()),
+                    None => format!(
                         "{}: initial_calibration",
                         config.capture.path.join("capture.json").display()
                     ),

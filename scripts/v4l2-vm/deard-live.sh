@@ -38,7 +38,7 @@ step "dear devices"
 dear devices > /tmp/devices.txt 2>&1; rc=$?
 cat /tmp/devices.txt
 check "dear devices exits 0" [ $rc = 0 ]
-check "dear devices lists the ToF node's 'Y16 ' as tof depth" grep -q "format \"Y16 \".*\[tof depth\]" /tmp/devices.txt
+check "dear devices lists the ToF node's 'Y16 ' as tof depth or amplitude" grep -q "format \"Y16 \".*\[tof depth or amplitude\]" /tmp/devices.txt
 check "dear devices lists the Loop Video control" grep -q "loop_video" /tmp/devices.txt
 
 step "feed $out -> $tof, start deard"

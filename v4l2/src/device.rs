@@ -132,12 +132,10 @@ impl DeviceError {
     pub fn from_io(path: &Path, what: &'static str, source: io::Error) -> Self {
         let path = path.to_path_buf();
         match source.raw_os_error() {
-            Some(libc_errno::ENOENT) => DeviceError::NotFound { path },
-            Some(libc_errno::EACCES) | Some(libc_errno::EPERM) => {
-                DeviceError::PermissionDenied { path }
-            }
-            Some(libc_errno::EBUSY) => DeviceError::Busy { path },
-            Some(libc_errno::ENODEV) | Some(libc_errno::ENXIO) => DeviceError::Gone { path },
+            Some(libc::ENOENT) => DeviceError::NotFound { path },
+            Some(libc::EACCES) | Some(libc::EPERM) => DeviceError::PermissionDenied { path },
+            Some(libc::EBUSY) => DeviceError::Busy { path },
+            Some(libc::ENODEV) | Some(libc::ENXIO) => DeviceError::Gone { path },
             _ => DeviceError::Io { path, what, source },
         }
     }
@@ -149,21 +147,10 @@ impl DeviceError {
             DeviceError::NotFound { .. } | DeviceError::Gone { .. } | DeviceError::Busy { .. } => {
                 true
             }
-            DeviceError::Io { source, .. } => source.raw_os_error() == Some(libc_errno::EIO),
+            DeviceError::Io { source, .. } => source.raw_os_error() == Some(libc::EIO),
             _ => false,
         }
     }
-}
-
-/// The errno values we name (Linux, every architecture the daemon builds for).
-pub(crate) mod libc_errno {
-    pub const EPERM: i32 = 1;
-    pub const ENOENT: i32 = 2;
-    pub const EIO: i32 = 5;
-    pub const ENXIO: i32 = 6;
-    pub const EACCES: i32 = 13;
-    pub const EBUSY: i32 = 16;
-    pub const ENODEV: i32 = 19;
 }
 
 /// The `/dev/video*` nodes in name order (`video2` before `video10`).

@@ -39,8 +39,8 @@ pub struct CaptureStream {
     // Declared before `device`: the buffers are unmapped and streaming stopped before the
     // file is closed.
     stream: Stream<'static>,
-    device: Device,
-    timeout: Duration,
+    // Kept open for the stream's life (the buffers map its file).
+    _device: Device,
 }
 
 impl std::fmt::Debug for CaptureStream {
@@ -71,8 +71,7 @@ impl CaptureStream {
             path: path.to_path_buf(),
             format,
             stream,
-            device,
-            timeout,
+            _device: device,
         })
     }
 
@@ -84,11 +83,6 @@ impl CaptureStream {
     /// The format the node streams in.
     pub fn format(&self) -> &Negotiated {
         &self.format
-    }
-
-    /// The open device (for controls while streaming).
-    pub fn device(&self) -> &Device {
-        &self.device
     }
 
     /// The next buffer, or `Ok(None)` when none arrived within the timeout. A node that is
@@ -115,11 +109,6 @@ impl CaptureStream {
             Err(e) if e.kind() == std::io::ErrorKind::TimedOut => Ok(None),
             Err(e) => Err(DeviceError::from_io(&self.path, "VIDIOC_DQBUF", e)),
         }
-    }
-
-    /// How long [`next`](Self::next) waits.
-    pub fn timeout(&self) -> Duration {
-        self.timeout
     }
 }
 

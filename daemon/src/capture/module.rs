@@ -13,10 +13,10 @@ use std::path::{Path, PathBuf};
 use dear_pipeline::capture::Intrinsics;
 use dear_pipeline::geometry::register::Registration;
 use dear_pipeline::Calibration;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 /// The file as written.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModuleCalibration {
     /// Metres per unit of a `Z16 `/`Y16 ` depth image (RealSense: 0.001).
@@ -34,7 +34,7 @@ fn default_depth_scale() -> f32 {
 }
 
 /// One camera: its image size and pinhole intrinsics (pixel centres at integer coordinates).
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
     pub width: u32,
@@ -57,7 +57,7 @@ impl Camera {
 }
 
 /// `X_rgb = R · X_tof + T`.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Extrinsics {
     /// Row-major; a proper rotation (orthonormal, determinant 1) within 1e-3.
@@ -166,20 +166,6 @@ impl ModuleCalibration {
             }
         }
         Ok(())
-    }
-
-    /// The calibration as JSON, for a recording's manifest.
-    pub fn raw_json(&self) -> serde_json::Value {
-        let cam = |c: &Camera| serde_json::json!({"width": c.width, "height": c.height, "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy});
-        serde_json::json!({
-            "depth_scale_m": self.depth_scale_m,
-            "tof": cam(&self.tof),
-            "rgb": cam(&self.rgb),
-            "extrinsics": {
-                "rotation": self.extrinsics.rotation,
-                "translation_m": self.extrinsics.translation_m,
-            },
-        })
     }
 
     /// The rotation and intrinsics registration of ToF frames onto the RGB grid.

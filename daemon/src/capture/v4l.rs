@@ -63,7 +63,9 @@ pub enum V4lOpenError {
 /// The ToF images of one frame, on the ToF camera's grid.
 struct TofImages {
     depth: Array2<f32>,
-    amplitude: Array2<f32>,
+    /// `None` for a depth format: the amplitude node's image is filled in by the pairing, or
+    /// without one [`V4lSource::frame`] uses 1 wherever depth is valid.
+    amplitude: Option<Array2<f32>>,
 }
 
 /// What a node's thread hands over.
@@ -117,9 +119,7 @@ pub struct V4lSource {
 /// How a ToF node's buffers become depth and amplitude.
 #[derive(Clone, Copy)]
 enum TofDecoding {
-    /// `Z16 `/`Y16 ` depth times the scale; no amplitude node, so amplitude is 1 where depth is
-    /// valid (the chain normalises amplitude by a percentile: a constant carries no signal
-    /// but no bias either).
+    /// `Z16 `/`Y16 ` depth times the scale; the amplitude comes from the amplitude node, if any.
     Depth { scale: f32 },
     /// Four phase images in one buffer (`Y12P` stacked), or in four consecutive buffers.
     Phase {
@@ -232,7 +232,7 @@ impl V4lSource {
             "kind": "deard --record of a live V4L2 module",
             "description": description,
             "calibration_file": config.calibration.display().to_string(),
-            "module": module.raw_json(),
+            "module": serde_json::to_value(&module).expect("plain data serialises"),
             "depth": "z-depth in the RGB camera, registered onto the RGB grid (rotation and intrinsics undone; the translation left to the calibration), mm on disk",
             "amplitude": match (tof_decoding, &config.amplitude) {
                 (TofDecoding::Phase { .. }, _) => "0.5·|(D0−D2, D1−D3)| of the 4 phases, raw units".to_string(),
@@ -300,16 +300,21 @@ impl V4lSource {
     /// The RgbdFrame of a pair: ToF images registered onto the RGB grid.
     fn frame(&mut self, tof: TofImages, rgb: Array3<u8>, ts_us: u64) -> RgbdFrame {
         let (w, h) = (self.size.0 as usize, self.size.1 as usize);
+        // No amplitude node: 1 wherever depth is valid (the chain normalises amplitude by a
+        // percentile, so a constant carries no signal but no bias either).
+        let tof_amplitude = tof
+            .amplitude
+            .unwrap_or_else(|| tof.depth.mapv(|d| if d > 0.0 { 1.0 } else { 0.0 }));
         let (mut depth, mut amplitude) =
             if self.registration.is_identity() && tof.depth.dim() == (h, w) {
-                (tof.depth, tof.amplitude)
+                (tof.depth, tof_amplitude)
             } else {
                 let mut depth = Array2::zeros((h, w));
                 let mut amplitude = Array2::zeros((h, w));
                 register_tof(
                     &self.registration,
                     tof.depth.view(),
-                    tof.amplitude.view(),
+                    tof_amplitude.view(),
                     depth.view_mut(),
                     amplitude.view_mut(),
                 );
@@ -342,7 +347,7 @@ impl V4lSource {
         let mut next = first;
         while let Some(p) = next {
             let mut images = p.a;
-            images.amplitude = p.b;
+            images.amplitude = Some(p.b);
             if let Some(done) = self.pairer.push_a(p.ts_a_us, images) {
                 self.ready.push_back(done);
             }
@@ -371,22 +376,16 @@ fn fps_text(fps: Option<f64>) -> String {
     fps.map_or(String::new(), |f| format!(" at {f:.3} fps"))
 }
 
-fn request(node: &NodeConfig) -> FormatRequest {
-    let mut fourcc = [b' '; 4];
-    for (f, b) in fourcc.iter_mut().zip(node.format.bytes()) {
-        *f = b;
-    }
-    FormatRequest {
-        fourcc,
+fn open_node(role: &'static str, node: &NodeConfig) -> Result<CaptureStream, V4lOpenError> {
+    let format = node_format(node).map_err(|message| V4lOpenError::Config { role, message })?;
+    let want = FormatRequest {
+        fourcc: format.fourcc(),
         width: node.width,
         height: node.height,
         fps: node.fps,
-    }
-}
-
-fn open_node(role: &'static str, node: &NodeConfig) -> Result<CaptureStream, V4lOpenError> {
+    };
     let controls: Vec<(String, i64)> = node.controls.iter().map(|(k, v)| (k.clone(), *v)).collect();
-    CaptureStream::open(&node.device, &request(node), &controls, DEQUEUE_TIMEOUT)
+    CaptureStream::open(&node.device, &want, &controls, DEQUEUE_TIMEOUT)
         .map_err(|source| V4lOpenError::Device { role, source })
 }
 
@@ -471,8 +470,10 @@ impl Decoder for TofDecoder {
                 let mut depth = Array2::zeros((h, w));
                 pixel::depth::depth_into(&self.frame, buffer.data, scale, depth.view_mut())
                     .map_err(|e| e.to_string())?;
-                let amplitude = depth.mapv(|d| if d > 0.0 { 1.0 } else { 0.0 });
-                TofImages { depth, amplitude }
+                TofImages {
+                    depth,
+                    amplitude: None,
+                }
             }
             TofDecoding::Phase {
                 params,
@@ -482,7 +483,7 @@ impl Decoder for TofDecoder {
                     .map_err(|e| e.to_string())?;
                 TofImages {
                     depth: image.radial,
-                    amplitude: image.amplitude,
+                    amplitude: Some(image.amplitude),
                 }
             }
             TofDecoding::Phase {
@@ -521,7 +522,7 @@ impl Decoder for TofDecoder {
                     ts_us: self.first_ts_us,
                     images: TofImages {
                         depth: image.radial,
-                        amplitude: image.amplitude,
+                        amplitude: Some(image.amplitude),
                     },
                 }));
             }
