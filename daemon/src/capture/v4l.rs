@@ -267,7 +267,16 @@ impl V4lSource {
                 "tof",
                 config.tof.node.clone(),
                 tof_stream,
-                TofDecoder::new(tof_frame, tof_decoding),
+                TofDecoder::new(
+                    tof_frame,
+                    tof_decoding,
+                    phase::Pinhole {
+                        fx: module.tof.fx,
+                        fy: module.tof.fy,
+                        cx: module.tof.cx,
+                        cy: module.tof.cy,
+                    },
+                ),
                 tx.clone(),
                 stop.clone(),
             ),
@@ -443,6 +452,9 @@ impl Decoder for AmplitudeDecoder {
 struct TofDecoder {
     frame: FrameFormat,
     decoding: TofDecoding,
+    /// The ToF camera's intrinsics: a 4-phase distance is along the pixel's ray, the chain
+    /// wants z.
+    pinhole: phase::Pinhole,
     /// Consecutive phase buffers of the frame being collected, with the first's timestamp.
     phases: Vec<Vec<u8>>,
     first_ts_us: u64,
@@ -450,13 +462,27 @@ struct TofDecoder {
 }
 
 impl TofDecoder {
-    fn new(frame: FrameFormat, decoding: TofDecoding) -> Self {
+    fn new(frame: FrameFormat, decoding: TofDecoding, pinhole: phase::Pinhole) -> Self {
         TofDecoder {
             frame,
             decoding,
+            pinhole,
             phases: Vec::with_capacity(4),
             first_ts_us: 0,
             last_sequence: None,
+        }
+    }
+}
+
+impl TofDecoder {
+    /// A demodulated phase frame as z-depth (radial distance times the ray's cosine) and its
+    /// amplitude.
+    fn z_images(&self, image: phase::PhaseImage) -> TofImages {
+        let mut depth = image.radial;
+        phase::radial_to_z_in_place(depth.view_mut(), &self.pinhole);
+        TofImages {
+            depth,
+            amplitude: Some(image.amplitude),
         }
     }
 }
@@ -481,10 +507,7 @@ impl Decoder for TofDecoder {
             } => {
                 let image = phase::demodulate_stacked(&self.frame, buffer.data, &params)
                     .map_err(|e| e.to_string())?;
-                TofImages {
-                    depth: image.radial,
-                    amplitude: Some(image.amplitude),
-                }
+                self.z_images(image)
             }
             TofDecoding::Phase {
                 params,
@@ -520,10 +543,7 @@ impl Decoder for TofDecoder {
                 let image = image.map_err(|e| e.to_string())?;
                 return Ok(Some(NodeMsg::Tof {
                     ts_us: self.first_ts_us,
-                    images: TofImages {
-                        depth: image.radial,
-                        amplitude: Some(image.amplitude),
-                    },
+                    images: self.z_images(image),
                 }));
             }
         };
@@ -689,5 +709,46 @@ impl Drop for V4lSource {
         for t in self.threads.drain(..) {
             let _ = t.join();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_phase_frame_becomes_z_depth_along_each_pixels_ray() {
+        let pinhole = phase::Pinhole {
+            fx: 100.0,
+            fy: 100.0,
+            cx: 2.0,
+            cy: 1.0,
+        };
+        let decoder = TofDecoder::new(
+            FrameFormat::unpadded(PixelFormat::Y12, 5, 3),
+            TofDecoding::Phase {
+                params: phase::PhaseParams {
+                    modulation_hz: 75e6,
+                    q_sign: phase::QSign::Standard,
+                    min_amplitude: 0.0,
+                },
+                stacked: true,
+            },
+            pinhole,
+        );
+        let mut radial = Array2::from_elem((3, 5), 2.0f32);
+        radial[(0, 0)] = 0.0;
+        let images = decoder.z_images(phase::PhaseImage {
+            radial,
+            amplitude: Array2::from_elem((3, 5), 7.0),
+        });
+        // On the principal point the ray is the axis: z = distance.
+        assert_eq!(images.depth[(1, 2)], 2.0);
+        // Off axis z is shorter: (4, 2) is (0.02, 0.01) from the axis in normalised units.
+        let want = 2.0 / (1.0f32 + 0.02 * 0.02 + 0.01 * 0.01).sqrt();
+        assert!((images.depth[(2, 4)] - want).abs() < 1e-6);
+        assert!(images.depth[(2, 4)] < 2.0);
+        assert_eq!(images.depth[(0, 0)], 0.0, "invalid stays invalid");
+        assert_eq!(images.amplitude.unwrap()[(2, 4)], 7.0);
     }
 }
