@@ -4,6 +4,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
+# A run from a clean clone gains nothing from incremental state, and it is gigabytes.
+export CARGO_INCREMENTAL=0
+# A full disk shows up as a linker "Bus error" far from its cause; say up front what there is.
+df -h . | sed 's/^/disk: /'
 
 echo "== msrv";         python3 scripts/msrv.py
 echo "== cargo fmt";    cargo fmt --all --check
