@@ -17,11 +17,9 @@ use std::time::Duration;
 
 use anyhow::{bail, Context};
 use clap::Args;
+use dear_capture::{layout::MANIFEST_FILE, CaptureManifest, CaptureWriter, Intrinsics, RgbdFrame};
 use dear_client::save::{auto_depth_range, save_depth_colorized, save_rgb_depth_blend};
 use dear_client::{Client, Frame};
-use dear_pipeline::capture::layout::MANIFEST_FILE;
-use dear_pipeline::capture::{CaptureManifest, CaptureWriter, Intrinsics};
-use dear_pipeline::frame::RgbdFrame;
 use serde_json::{json, Value};
 
 use super::stats::flag_names;

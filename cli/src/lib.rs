@@ -182,7 +182,7 @@ pub fn first_frame(
 
 /// `FX,FY,CX,CY`: the RGB camera's pinhole intrinsics given on the command line (`dump`,
 /// `record`; clap value parser).
-pub fn parse_intrinsics(s: &str) -> Result<dear_pipeline::capture::Intrinsics, String> {
+pub fn parse_intrinsics(s: &str) -> Result<dear_capture::Intrinsics, String> {
     let values: Vec<f32> = s
         .split(',')
         .map(|v| v.trim().parse::<f32>())
@@ -199,7 +199,7 @@ pub fn parse_intrinsics(s: &str) -> Result<dear_pipeline::capture::Intrinsics, S
             "{s:?}: focal lengths must be positive and all values finite"
         ));
     }
-    Ok(dear_pipeline::capture::Intrinsics { fx, fy, cx, cy })
+    Ok(dear_capture::Intrinsics { fx, fy, cx, cy })
 }
 
 /// Service name argument shared by the subcommands: the default camera's frame service.

@@ -39,8 +39,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context};
 use clap::Args;
+use dear_capture::Intrinsics;
 use dear_client::{Client, Frame};
-use dear_pipeline::capture::Intrinsics;
 
 use self::mcap_file::{DepthEncoding, FrameData, RecordSummary, Recorder};
 use super::{first_frame, next_frame, parse_intrinsics, Interrupted, StopFlag};

@@ -10,7 +10,7 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use dear_pipeline::Calibration;
+use dear_capture::Calibration;
 use dear_proto::{flags, FrameHeader};
 use serde::{Deserialize, Serialize};
 

@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use dear_pipeline::Calibration;
+use dear_capture::Calibration;
 use serde::{Deserialize, Serialize};
 
 /// Why a configuration cannot be used. Every message names the file (when there is one) and
@@ -523,7 +523,7 @@ fn check_v4l(v4l: &V4lConfig) -> Result<(), String> {
                 names.join(", ")
             ));
         }
-        let max = dear_pipeline::capture::manifest::MAX_SIDE;
+        let max = dear_capture::manifest::MAX_SIDE;
         if !(1..=max).contains(&node.width) || !(1..=max).contains(&node.height) {
             return Err(format!(
                 "{key} width = {}, height = {} must be within 1..={max}",

@@ -11,6 +11,7 @@
 
 use std::time::{Duration, Instant};
 
+use dear_capture::{Calibration, RgbdFrame};
 use dear_pipeline::align::StaticAligner;
 use dear_pipeline::dear::{
     BackgroundCalibrator, ChainError, ChainInput, ChainMode, ChainOutput, DearChain,
@@ -20,7 +21,6 @@ use dear_pipeline::filter::ClassicalRefiner;
 use dear_pipeline::geometry::LsqError;
 use dear_pipeline::model::{BundleError, ModelBundle};
 use dear_pipeline::online::{Measurement, NetworkTicket, OnlineCalibrator, OnlineConfig};
-use dear_pipeline::{Calibration, RgbdFrame};
 use dear_proto::{flags, FrameHeader, Stage};
 use ndarray::{Array2, ArrayViewMut2, ArrayViewMut3};
 

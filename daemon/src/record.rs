@@ -12,8 +12,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc::{self, SyncSender, TrySendError};
 use std::thread::{self, JoinHandle};
 
-use dear_pipeline::capture::{CaptureError, CaptureManifest, CaptureWriter};
-use dear_pipeline::RgbdFrame;
+use dear_capture::{CaptureError, CaptureManifest, CaptureWriter, RgbdFrame};
 
 /// Frames waiting for the writer.
 const QUEUE: usize = 8;
@@ -130,7 +129,7 @@ impl Recorder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use dear_pipeline::capture::{CaptureDir, Intrinsics};
+    use dear_capture::{CaptureDir, Intrinsics};
     use ndarray::{Array2, Array3};
 
     fn frame(index: u64, timestamp_ns: u64) -> RgbdFrame {

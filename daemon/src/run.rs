@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::thread;
 use std::time::{Duration, Instant};
 
-use dear_pipeline::Calibration;
+use dear_capture::Calibration;
 use dear_proto::{FrameHeader, Stage};
 
 use crate::calibration_state::CalibrationState;

@@ -1,6 +1,6 @@
 //! Direct alignment: fit the four calibration numbers `(t_x, t_y, c_x, c_y)` against every edge
 //! pixel of the frame at once, instead of matching patches first and fitting a line to the
-//! matches afterwards ([`crossmodal`](crate::crossmodal)).
+//! matches afterwards (the edge-matching baseline of `dear eval`, `evaluate::edge_matching`).
 //!
 //! # Why
 //!
@@ -59,7 +59,7 @@
 use ndarray::{Array2, ArrayView2, ArrayView3};
 
 use crate::calibration::Calibration;
-use crate::crossmodal::{gradient_magnitude, normalise_by_p99, rgb_to_gray};
+use crate::edges::{gradient_magnitude, normalise_by_p99, rgb_to_gray};
 use crate::geometry::surface::is_valid_depth;
 
 /// Settings of [`estimate_calibration_direct`].
@@ -1109,7 +1109,7 @@ fn gauss_newton(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::crossmodal::tests::textured_scene;
+    use crate::edges::test_scene::textured_scene;
 
     fn max_flow_error(c: Calibration, truth: Calibration, depths: &[f32]) -> f32 {
         depths

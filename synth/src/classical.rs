@@ -11,7 +11,7 @@ use anyhow::{Context, Result};
 use ndarray::Array2;
 use rayon::prelude::*;
 
-use dear_pipeline::capture::{png, CaptureDir};
+use dear_capture::{png, CaptureDir};
 use dear_pipeline::filter::ClassicalRefiner;
 
 /// Runs the classical refiner (default settings, as the daemon) on every frame of the capture

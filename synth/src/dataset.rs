@@ -8,7 +8,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use dear_pipeline::capture::{CaptureManifest, CaptureWriter, Intrinsics};
+use dear_capture::{CaptureManifest, CaptureWriter, Intrinsics};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 

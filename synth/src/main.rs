@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
-use dear_pipeline::capture::CaptureDir;
+use dear_capture::CaptureDir;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use dear_synth::dataset::{generate, GenerateParams};

@@ -21,9 +21,8 @@
 use std::path::Path;
 
 use anyhow::{ensure, Context, Result};
-use dear_pipeline::capture::{CaptureDir, CaptureWriter};
+use dear_capture::{Calibration, CaptureDir, CaptureWriter, RgbdFrame};
 use dear_pipeline::geometry::synthesize_view;
-use dear_pipeline::{Calibration, RgbdFrame};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};

@@ -1,87 +1,93 @@
 //! The preview panel (`dear-synth preview`): RGB | amplitude | ToF depth | ground truth | error.
 //!
-//! ToF depth and ground truth share one colour scale (`dear_picture`'s depth map, the same as
-//! the SDK's previews and `dear eval`'s figures; from the 1st to the 99th
-//! percentile of the valid ground truth), so equal colours mean equal depths; invalid pixels are
-//! black. The error map is ToF − ground truth on the same pixel, blue (too near) – white – red
-//! (too far), saturating at ±`error_range_m`; on a misaligned frame it shows the misalignment
-//! as well as the ToF errors. Amplitude is shown as `√(a / a₉₉)` (grey).
+//! Every tile and the panel are `dear_picture`'s, the same as the SDK's previews and `dear
+//! eval`'s figures: ToF depth and ground truth share one colour scale (the display range of the
+//! ground truth, 1st to 99th percentile of its valid depth), so equal colours mean equal
+//! depths; invalid pixels are black. The error map is ToF − ground truth on the same pixel,
+//! blue (too near) – white – red (too far), saturating at ±`error_range_m`; on a misaligned
+//! frame it shows the misalignment as well as the ToF errors. Amplitude is shown as
+//! `√(a / a₉₉)` (grey).
 
-use dear_picture::{depth_turbo, diverging, INVALID};
-use dear_pipeline::RgbdFrame;
-use image::{imageops, RgbImage};
-use ndarray::Array2;
+use dear_capture::{is_valid_depth, RgbdFrame};
+use dear_picture::depth::{depth_colors, display_range, signed_error_colors};
+use dear_picture::panel::{hstack, scaled};
+use dear_picture::tile::{amplitude_image, rgb_image};
+use image::RgbImage;
+use ndarray::Zip;
 
-/// The `q`-quantile of the values passing `keep` (nearest rank, [`dear_stats`]).
-fn quantile(a: &Array2<f32>, q: f64, keep: impl Fn(f32) -> bool) -> Option<f32> {
-    let mut v: Vec<f32> = a.iter().copied().filter(|&x| keep(x)).collect();
-    dear_stats::select_percentile(&mut v, q)
-}
-
-fn map_image(a: &Array2<f32>, f: impl Fn(f32) -> [u8; 3]) -> RgbImage {
-    let (h, w) = a.dim();
-    RgbImage::from_fn(w as u32, h as u32, |x, y| {
-        image::Rgb(f(a[(y as usize, x as usize)]))
-    })
-}
-
-/// Builds the five-panel preview of a frame, each panel scaled by `scale`.
+/// Builds the five-tile preview of a frame, each tile scaled by `scale`. Without ground truth
+/// the ToF depth is its own reference (its error tile is white where valid).
 pub fn panel(frame: &RgbdFrame, error_range_m: f32, scale: f64) -> RgbImage {
-    let (h, w) = frame.dim();
-    let gt = frame
-        .gt_depth
-        .clone()
-        .unwrap_or_else(|| frame.depth.clone());
-    let valid = dear_pipeline::is_valid_depth;
-    let lo = quantile(&gt, 0.01, valid).unwrap_or(0.0);
-    let hi = quantile(&gt, 0.99, valid).unwrap_or(1.0).max(lo + 1e-3);
-    let depth_colour = |z: f32| {
-        if valid(z) {
-            depth_turbo(((z - lo) / (hi - lo)) as f64)
-        } else {
-            INVALID
-        }
-    };
-    let a99 = quantile(&frame.amplitude, 0.99, |a| a > 0.0)
-        .unwrap_or(1.0)
-        .max(1e-6);
-    let rgb = RgbImage::from_fn(w as u32, h as u32, |x, y| {
-        let (x, y) = (x as usize, y as usize);
-        image::Rgb([0, 1, 2].map(|c| frame.rgb[(y, x, c)]))
-    });
-    let amp = map_image(&frame.amplitude, |a| {
-        let g = ((a / a99).max(0.0).sqrt().min(1.0) * 255.0) as u8;
-        [g, g, g]
-    });
-    let tof = map_image(&frame.depth, depth_colour);
-    let gtimg = map_image(&gt, depth_colour);
-    let err = Array2::from_shape_fn((h, w), |p| {
-        if valid(frame.depth[p]) && valid(gt[p]) {
-            frame.depth[p] - gt[p]
+    let gt = frame.gt_depth.as_ref().unwrap_or(&frame.depth);
+    let range = Some(display_range(gt.view(), None));
+    let error = Zip::from(&frame.depth).and(gt).map_collect(|&tof, &gt| {
+        if is_valid_depth(tof) && is_valid_depth(gt) {
+            tof - gt
         } else {
             f32::NAN
         }
     });
-    let errimg = map_image(&err, |e| {
-        if e.is_nan() {
-            [0, 0, 0]
-        } else {
-            diverging((e / error_range_m) as f64)
-        }
-    });
-    let (pw, ph) = (
-        ((w as f64 * scale).round() as u32).max(1),
-        ((h as f64 * scale).round() as u32).max(1),
-    );
-    let gap = 4u32;
-    let mut out = RgbImage::from_pixel(5 * pw + 4 * gap, ph, image::Rgb([255, 255, 255]));
-    for (i, img) in [rgb, amp, tof, gtimg, errimg].into_iter().enumerate() {
-        let img = if (pw, ph) == (w as u32, h as u32) {
-            img
-        } else {
-            imageops::resize(&img, pw, ph, imageops::FilterType::Triangle)
-        };
-        imageops::replace(&mut out, &img, (i as u32 * (pw + gap)) as i64, 0);
+    let tiles = [
+        rgb_image(frame.rgb.view()),
+        amplitude_image(frame.amplitude.view()),
+        depth_colors(frame.depth.view(), range),
+        depth_colors(gt.view(), range),
+        signed_error_colors(error.view(), error_range_m),
+    ];
+    hstack(&tiles.map(|tile| scaled(tile, scale)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dear_picture::panel::{BACKGROUND, GAP};
+    use ndarray::{Array2, Array3};
+
+    /// A 4×6 frame: ToF 1 m left, 3 m right, 10 cm too far in the top row; ground truth 1 m
+    /// left, 3 m right.
+    fn frame() -> RgbdFrame {
+        let gt = Array2::from_shape_fn((4, 6), |(_, c)| if c < 3 { 1.0 } else { 3.0 });
+        let mut depth = gt.clone();
+        depth.row_mut(0).map_inplace(|z| *z += 0.1);
+        depth[(3, 5)] = 0.0;
+        let mut frame = RgbdFrame::sensor(
+            0,
+            0,
+            Array3::from_elem((4, 6, 3), 90u8),
+            Array2::from_elem((4, 6), 50.0),
+            depth,
+        );
+        frame.gt_depth = Some(gt);
+        frame
     }
-    out
+
+    #[test]
+    fn five_tiles_on_the_ground_truths_scale() {
+        let frame = frame();
+        let img = panel(&frame, 0.1, 1.0);
+        assert_eq!(img.dimensions(), (5 * 6 + 4 * GAP, 4));
+        let tile = |i: u32, x: u32, y: u32| img.get_pixel(i * (6 + GAP) + x, y).0;
+        assert_eq!(tile(0, 0, 0), [90, 90, 90], "RGB");
+        assert_eq!(tile(1, 0, 0), [255, 255, 255], "flat amplitude is white");
+        assert_eq!(img.get_pixel(6, 0).0, BACKGROUND.0, "gap");
+        // ToF and ground truth share the ground truth's 1 … 3 m scale: equal depth, equal colour.
+        let range = display_range(frame.gt_depth.as_ref().unwrap().view(), None);
+        assert_eq!(range, (1.0, 3.0));
+        let gt_colors = depth_colors(frame.gt_depth.as_ref().unwrap().view(), Some(range));
+        assert_eq!(tile(2, 0, 1), gt_colors.get_pixel(0, 1).0);
+        assert_eq!(tile(3, 0, 1), gt_colors.get_pixel(0, 1).0);
+        assert_eq!(tile(2, 5, 3), [0, 0, 0], "invalid ToF is black");
+        // Error: the top row is 10 cm too far, saturated red; elsewhere white; none where the
+        // ToF has no depth.
+        assert_eq!(tile(4, 0, 0), dear_picture::colormap::diverging(1.0));
+        assert_eq!(tile(4, 0, 1), [255, 255, 255]);
+        assert_eq!(tile(4, 5, 3), [0, 0, 0]);
+    }
+
+    #[test]
+    fn scale_resizes_every_tile_not_the_gaps() {
+        let img = panel(&frame(), 0.1, 2.0);
+        assert_eq!(img.dimensions(), (5 * 12 + 4 * GAP, 8));
+        assert_eq!(img.get_pixel(12, 0).0, BACKGROUND.0);
+    }
 }

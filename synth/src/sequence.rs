@@ -16,8 +16,7 @@ use std::f64::consts::TAU;
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use dear_pipeline::capture::CaptureWriter;
-use dear_pipeline::Calibration;
+use dear_capture::{Calibration, CaptureWriter};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};

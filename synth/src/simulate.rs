@@ -1,7 +1,7 @@
 //! One simulated sample: render the scene, run the sensor, tone-map the RGB image, and package
 //! everything as a `dear_pipeline` [`RgbdFrame`] on the ToF grid (an *aligned* sample).
 
-use dear_pipeline::{Calibration, RgbdFrame};
+use dear_capture::{Calibration, RgbdFrame};
 use ndarray::{Array2, Array3};
 use serde::{Deserialize, Serialize};
 

@@ -12,7 +12,7 @@ pub use dear_pipeline::model::hex_sha256 as sha256_hex;
 
 use std::collections::BTreeMap;
 
-use dear_pipeline::capture::CaptureDir;
+use dear_capture::CaptureDir;
 use dear_proto::{FrameHeader, PayloadLayout};
 use deard::config::PipelineConfig;
 use deard::processing::{FrameOutput, Processor};

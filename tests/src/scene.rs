@@ -4,8 +4,9 @@
 
 use std::path::Path;
 
-use dear_pipeline::capture::{CaptureDir, CaptureManifest, CaptureWriter, Intrinsics};
-use dear_pipeline::{Calibration, RgbdFrame};
+use dear_capture::{
+    Calibration, CaptureDir, CaptureManifest, CaptureWriter, Intrinsics, RgbdFrame,
+};
 use ndarray::{Array2, Array3};
 
 /// The factory calibration the tests' captures carry: a few pixels off in every term, so

@@ -534,7 +534,7 @@ fn bad_frames_are_skipped_counted_and_named() {
     std::fs::remove_file(&missing).unwrap();
     let wrong_size = capture.frame_paths(7).depth;
     let small = ndarray::Array2::<f32>::from_elem((H as usize / 2, W as usize / 2), 1.0);
-    dear_pipeline::capture::png::write_depth(&wrong_size, small.view(), 0.001).unwrap();
+    dear_capture::png::write_depth(&wrong_size, small.view(), 0.001).unwrap();
     let expected = expected_payload_hashes(&capture, &Engine::classical().pipeline);
     let readable: Vec<u64> = expected.keys().copied().collect();
     assert_eq!(readable, vec![0, 1, 3, 4, 6, 8, 9]);

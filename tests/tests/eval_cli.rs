@@ -4,10 +4,9 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use dear_capture::{Calibration, CaptureManifest, CaptureWriter, Intrinsics};
 use dear_e2e_tests::processes::binary;
 use dear_e2e_tests::scene;
-use dear_pipeline::capture::{CaptureManifest, CaptureWriter, Intrinsics};
-use dear_pipeline::Calibration;
 use ndarray::Array2;
 
 const W: usize = 64;

@@ -5,12 +5,11 @@
 //! sample. On every published frame confidence is 0 exactly where depth is 0.
 use std::path::{Path, PathBuf};
 
+use dear_capture::{CaptureDir, RgbdFrame};
 use dear_e2e_tests::bundles::{broken_refine_graph, smoke_bundle_with_refine};
-use dear_pipeline::capture::CaptureDir;
 use dear_pipeline::dear::{ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
 use dear_pipeline::filter::ClassicalRefiner;
 use dear_pipeline::model::ModelBundle;
-use dear_pipeline::RgbdFrame;
 use ndarray::Array2;
 
 fn root() -> PathBuf {

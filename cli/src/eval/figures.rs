@@ -4,68 +4,30 @@
 use std::path::Path;
 
 use anyhow::Context;
-use dear_client::save::{blend_rgb_depth, colorize_depth, depth_colors};
-use dear_pipeline::RgbdFrame;
-use image::{imageops, Rgb, RgbImage};
+use dear_capture::{is_valid_depth, RgbdFrame};
+use dear_picture::blend::blend_rgb_depth;
+use dear_picture::depth::{colorize_depth, depth_colors, display_range};
+use dear_picture::panel::hstack;
+use dear_picture::plot::{depth_profile, Curve};
+use dear_picture::tile::{amplitude_image, rgb_image};
+use image::{Rgb, RgbImage};
 use ndarray::{Array2, ArrayView2};
 
 /// Largest error the error maps colour (deeper red above), metres.
 pub const ERROR_MAP_MAX_M: f32 = 0.2;
-/// Gap between tiles.
-const GAP: u32 = 4;
-const BACKGROUND: Rgb<u8> = Rgb([24, 24, 24]);
 
 /// Colours of the scan-line plot's curves.
 pub const SCANLINE_TOF: Rgb<u8> = Rgb([150, 150, 150]);
 pub const SCANLINE_RESULT: Rgb<u8> = Rgb([230, 60, 40]);
 pub const SCANLINE_GT: Rgb<u8> = Rgb([60, 200, 90]);
-
-/// Tiles side by side, top-aligned, on a dark background.
-fn hstack(tiles: &[RgbImage]) -> RgbImage {
-    let width = tiles.iter().map(|t| t.width()).sum::<u32>() + GAP * (tiles.len() as u32 - 1);
-    let height = tiles.iter().map(|t| t.height()).max().unwrap_or(1);
-    let mut out = RgbImage::from_pixel(width, height, BACKGROUND);
-    let mut x = 0;
-    for t in tiles {
-        imageops::replace(&mut out, t, i64::from(x), 0);
-        x += t.width() + GAP;
-    }
-    out
-}
-
-fn rgb_image(frame: &RgbdFrame) -> RgbImage {
-    let (h, w) = frame.dim();
-    RgbImage::from_fn(w as u32, h as u32, |x, y| {
-        let (r, c) = (y as usize, x as usize);
-        Rgb([
-            frame.rgb[(r, c, 0)],
-            frame.rgb[(r, c, 1)],
-            frame.rgb[(r, c, 2)],
-        ])
-    })
-}
-
-/// The amplitude as grey, scaled to its 99th percentile (a few specular pixels would darken
-/// the rest under a max scaling).
-fn amplitude_image(amplitude: ArrayView2<f32>) -> RgbImage {
-    let mut values: Vec<f32> = amplitude.iter().copied().filter(|a| *a > 0.0).collect();
-    values.sort_by(f32::total_cmp);
-    let top = values
-        .get(values.len() * 99 / 100)
-        .copied()
-        .unwrap_or(1.0)
-        .max(1e-6);
-    let (h, w) = amplitude.dim();
-    RgbImage::from_fn(w as u32, h as u32, |x, y| {
-        let g = (amplitude[(y as usize, x as usize)] / top * 255.0).clamp(0.0, 255.0) as u8;
-        Rgb([g, g, g])
-    })
-}
+/// Plot pixels per image column of the scan-line plot, and its height.
+const SCANLINE_PX_PER_COLUMN: u32 = 2;
+const SCANLINE_HEIGHT: u32 = 220;
 
 /// `|result − gt|` where both are valid, else 0 (drawn black).
 pub fn error_map(result: ArrayView2<f32>, gt: ArrayView2<f32>) -> Array2<f32> {
     ndarray::Zip::from(result).and(gt).map_collect(|&r, &g| {
-        if dear_pipeline::is_valid_depth(r) && dear_pipeline::is_valid_depth(g) {
+        if is_valid_depth(r) && is_valid_depth(g) {
             // Exactly zero error would read as invalid (black); keep it visible.
             (r - g).abs().max(1e-4)
         } else {
@@ -75,15 +37,15 @@ pub fn error_map(result: ArrayView2<f32>, gt: ArrayView2<f32>) -> Array2<f32> {
 }
 
 /// RGB | amplitude | ToF depth | result | ground truth | error, depths on one colour scale
-/// (the ground truth's range), the error on `0 … ERROR_MAP_MAX_M`.
+/// (the ground truth's display range), the error on `0 … ERROR_MAP_MAX_M`.
 pub fn panel(frame: &RgbdFrame, result: ArrayView2<f32>) -> RgbImage {
     let gt = frame
         .gt_depth
         .as_ref()
         .expect("evaluated frames have ground truth");
-    let range = dear_client::save::auto_depth_range(gt.view());
+    let range = Some(display_range(gt.view(), None));
     hstack(&[
-        rgb_image(frame),
+        rgb_image(frame.rgb.view()),
         amplitude_image(frame.amplitude.view()),
         depth_colors(frame.depth.view(), range),
         depth_colors(result, range),
@@ -108,7 +70,7 @@ pub fn blends(frame: &RgbdFrame, result: ArrayView2<f32>) -> anyhow::Result<RgbI
 pub fn scanline_row(gt: ArrayView2<f32>) -> usize {
     let mut best = (0.0f32, gt.nrows() / 2);
     for (r, row) in gt.outer_iter().enumerate() {
-        let valid: Vec<f32> = row.iter().copied().filter(|z| *z > 0.0).collect();
+        let valid: Vec<f32> = row.iter().copied().filter(|&z| is_valid_depth(z)).collect();
         if valid.len() < row.len() / 2 {
             continue;
         }
@@ -121,8 +83,8 @@ pub fn scanline_row(gt: ArrayView2<f32>) -> usize {
     best.1
 }
 
-/// Depth along `row`: ToF input (grey), result (red), ground truth (green), on white with a
-/// light grid every 0.5 m. Two plot pixels per image column.
+/// Depth along `row`: ToF input (grey), ground truth (green) and result (red, on top), on
+/// white with a light grid every 0.5 m. Two plot pixels per image column.
 pub fn scanline_plot(frame: &RgbdFrame, result: ArrayView2<f32>, row: usize) -> RgbImage {
     let gt = frame
         .gt_depth
@@ -132,68 +94,85 @@ pub fn scanline_plot(frame: &RgbdFrame, result: ArrayView2<f32>, row: usize) -> 
         (frame.depth.row(row), SCANLINE_TOF),
         (gt.row(row), SCANLINE_GT),
         (result.row(row), SCANLINE_RESULT),
-    ];
-    let valid = curves
-        .iter()
-        .flat_map(|(c, _)| c.iter().copied())
-        .filter(|z| dear_pipeline::is_valid_depth(*z));
-    let (lo, hi) = valid.fold((f32::INFINITY, 0.0f32), |(lo, hi), z| {
-        (lo.min(z), hi.max(z))
-    });
-    let (lo, hi) = if lo < hi {
-        (lo - 0.1, hi + 0.1)
-    } else {
-        (0.0, 4.0)
-    };
-    let width = 2 * result.ncols() as u32;
-    let height = 220u32;
-    let mut img = RgbImage::from_pixel(width, height, Rgb([255, 255, 255]));
-    let y_of = |z: f32| ((hi - z) / (hi - lo) * (height - 1) as f32).round() as i64;
-    let mut grid = (lo / 0.5).ceil() * 0.5;
-    while grid < hi {
-        let y = y_of(grid);
-        for x in 0..width {
-            put(&mut img, i64::from(x), y, Rgb([225, 225, 225]));
-        }
-        grid += 0.5;
-    }
-    for (curve, colour) in curves {
-        let mut last: Option<(i64, i64)> = None;
-        for (c, &z) in curve.iter().enumerate() {
-            if !dear_pipeline::is_valid_depth(z) {
-                last = None;
-                continue;
-            }
-            let p = (2 * c as i64, y_of(z));
-            if let Some(q) = last {
-                line(&mut img, q, p, colour);
-            }
-            put(&mut img, p.0, p.1, colour);
-            last = Some(p);
-        }
-    }
-    img
-}
-
-fn put(img: &mut RgbImage, x: i64, y: i64, colour: Rgb<u8>) {
-    if x >= 0 && y >= 0 && (x as u32) < img.width() && (y as u32) < img.height() {
-        img.put_pixel(x as u32, y as u32, colour);
-    }
-}
-
-/// A straight segment (DDA; plots need nothing fancier).
-fn line(img: &mut RgbImage, a: (i64, i64), b: (i64, i64), colour: Rgb<u8>) {
-    let steps = (b.0 - a.0).abs().max((b.1 - a.1).abs()).max(1);
-    for i in 0..=steps {
-        let t = i as f64 / steps as f64;
-        let x = a.0 as f64 + t * (b.0 - a.0) as f64;
-        let y = a.1 as f64 + t * (b.1 - a.1) as f64;
-        put(img, x.round() as i64, y.round() as i64, colour);
-    }
+    ]
+    .map(|(depth, color)| Curve { depth, color });
+    depth_profile(&curves, SCANLINE_PX_PER_COLUMN, SCANLINE_HEIGHT)
 }
 
 /// Writes `img` as PNG, naming the file in any error.
 pub fn save(img: &RgbImage, path: &Path) -> anyhow::Result<()> {
     img.save(path)
         .with_context(|| format!("cannot write {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dear_picture::panel::GAP;
+    use ndarray::Array3;
+
+    /// 4×5 frame: ground truth 2 m except row 2, a 1 … 3 m ramp; the ToF 5 cm too far.
+    fn frame() -> RgbdFrame {
+        let gt = Array2::from_shape_fn(
+            (4, 5),
+            |(r, c)| {
+                if r == 2 {
+                    1.0 + 0.5 * c as f32
+                } else {
+                    2.0
+                }
+            },
+        );
+        let mut frame = RgbdFrame::sensor(
+            7,
+            0,
+            Array3::from_elem((4, 5, 3), 60u8),
+            Array2::from_elem((4, 5), 1.0),
+            gt.mapv(|z| z + 0.05),
+        );
+        frame.gt_depth = Some(gt);
+        frame
+    }
+
+    #[test]
+    fn panel_is_six_tiles_with_legends_on_ground_truth_and_error() {
+        let frame = frame();
+        let gt = frame.gt_depth.as_ref().unwrap();
+        let result = gt.view();
+        let img = panel(&frame, result);
+        let range = Some(display_range(gt.view(), None));
+        let gt_tile = colorize_depth(gt.view(), range);
+        let error_tile = colorize_depth(
+            error_map(result, gt.view()).view(),
+            Some((0.0, ERROR_MAP_MAX_M)),
+        );
+        assert_eq!(
+            img.dimensions(),
+            (
+                4 * 5 + gt_tile.width() + error_tile.width() + 5 * GAP,
+                gt_tile.height().max(error_tile.height())
+            )
+        );
+        // The result tile (fourth) equals the ground truth's colours: same depth, same scale.
+        let result_x = 3 * (5 + GAP);
+        assert_eq!(img.get_pixel(result_x + 4, 2).0, gt_tile.get_pixel(4, 2).0);
+        assert_eq!(img.get_pixel(0, 0).0, [60, 60, 60], "RGB first");
+    }
+
+    #[test]
+    fn scanline_follows_the_row_with_most_structure() {
+        let frame = frame();
+        let gt = frame.gt_depth.as_ref().unwrap();
+        let row = scanline_row(gt.view());
+        assert_eq!(row, 2);
+        let img = scanline_plot(&frame, gt.view(), row);
+        assert_eq!(img.dimensions(), (2 * 5, SCANLINE_HEIGHT));
+        // The result is drawn last: its samples are in its colour at columns 0, 2, … 8.
+        for c in 0..5u32 {
+            let column: Vec<_> = (0..SCANLINE_HEIGHT)
+                .map(|y| img.get_pixel(2 * c, y).0)
+                .collect();
+            assert!(column.contains(&SCANLINE_RESULT.0), "sample {c}");
+        }
+    }
 }

@@ -18,7 +18,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
-use dear_pipeline::capture::CaptureDir;
+use dear_capture::{CaptureDir, RgbdFrame};
 use dear_pipeline::evaluate::{
     ground_truth_flow, ground_truth_mask, BundleMethod, Evaluation, Method, MethodOutput,
     MethodReport, MethodRunner,
@@ -26,7 +26,6 @@ use dear_pipeline::evaluate::{
 use dear_pipeline::metrics::aepe;
 use dear_pipeline::model::ModelBundle;
 use dear_pipeline::online::{OnlineCalibrator, OnlineConfig};
-use dear_pipeline::RgbdFrame;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 

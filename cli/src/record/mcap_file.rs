@@ -7,7 +7,7 @@ use std::io::{Seek, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use dear_pipeline::capture::Intrinsics;
+use dear_capture::Intrinsics;
 use dear_proto::FrameHeader;
 use foxglove::bytes::Bytes;
 use foxglove::messages::{CameraCalibration, RawImage, Timestamp};

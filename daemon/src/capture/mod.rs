@@ -13,8 +13,7 @@ pub mod v4l;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use dear_pipeline::capture::CaptureManifest;
-use dear_pipeline::{Calibration, RgbdFrame};
+use dear_capture::{Calibration, CaptureManifest, RgbdFrame};
 
 /// What a source produced next.
 #[derive(Debug)]

@@ -10,9 +10,8 @@
 
 use std::path::{Path, PathBuf};
 
-use dear_pipeline::capture::Intrinsics;
+use dear_capture::{Calibration, Intrinsics};
 use dear_pipeline::geometry::register::Registration;
-use dear_pipeline::Calibration;
 use serde::{Deserialize, Serialize};
 
 /// The file as written.
@@ -114,7 +113,7 @@ impl ModuleCalibration {
             ));
         }
         for (name, cam) in [("tof", &self.tof), ("rgb", &self.rgb)] {
-            let max = dear_pipeline::capture::manifest::MAX_SIDE;
+            let max = dear_capture::manifest::MAX_SIDE;
             if !(1..=max).contains(&cam.width) || !(1..=max).contains(&cam.height) {
                 return Err(format!(
                     "[{name}] width = {}, height = {} must be within 1..={max}",

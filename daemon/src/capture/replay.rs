@@ -4,9 +4,7 @@
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use dear_pipeline::capture::CaptureManifest;
-use dear_pipeline::capture::{CaptureDir, CaptureError};
-use dear_pipeline::Calibration;
+use dear_capture::{Calibration, CaptureDir, CaptureError, CaptureManifest};
 
 use super::{sleep_unless, FrameSource, SourceItem};
 use crate::config::{CaptureConfig, Pacing};
@@ -186,7 +184,7 @@ mod tests {
     use std::sync::atomic::Ordering;
     use std::sync::Arc;
 
-    use dear_pipeline::capture::FramePaths;
+    use dear_capture::FramePaths;
 
     /// A capture at `root` with one frame per `(timestamp_ns, readable)`, copied from
     /// `samples/demo`'s first frame; unreadable frames have a truncated depth PNG.

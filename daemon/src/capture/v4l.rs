@@ -18,10 +18,8 @@ use std::sync::Arc;
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
 
-use dear_pipeline::capture::png::quantize_as_stored;
-use dear_pipeline::capture::CaptureManifest;
+use dear_capture::{png::quantize_as_stored, Calibration, CaptureManifest, RgbdFrame};
 use dear_pipeline::geometry::register::{register_tof, Registration};
-use dear_pipeline::{Calibration, RgbdFrame};
 use dear_v4l2::device::{DeviceError, FormatRequest};
 use dear_v4l2::pair::{Pair, PairCounts, Pairer};
 use dear_v4l2::pixel::{self, phase, FrameFormat, PixelFormat};

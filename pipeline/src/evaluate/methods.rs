@@ -4,8 +4,8 @@ use std::time::Instant;
 
 use ndarray::Array2;
 
+use super::edge_matching::{estimate_calibration_or, EdgeMatchParams};
 use crate::align::StaticAligner;
-use crate::crossmodal::{estimate_calibration_or, EdgeMatchParams};
 use crate::direct::{estimate_calibration_direct, DirectFitParams};
 use crate::filter::ClassicalRefiner;
 use crate::frame::Flow;

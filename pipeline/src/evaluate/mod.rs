@@ -5,6 +5,7 @@
 
 #[cfg(feature = "inference")]
 pub mod bundle;
+pub mod edge_matching;
 pub mod methods;
 pub mod report;
 

@@ -29,11 +29,8 @@ pub fn same_surface(z_ref: f32, z: f32) -> bool {
     (z - z_ref).abs() <= surface_tolerance(z_ref)
 }
 
-/// A depth sample is valid when it is positive and finite (0 marks "no measurement").
-#[inline]
-pub fn is_valid_depth(z: f32) -> bool {
-    z > 0.0 && z.is_finite()
-}
+/// The one validity rule of a depth sample, defined with the capture format that stores it.
+pub use dear_capture::is_valid_depth;
 
 #[cfg(test)]
 mod tests {
@@ -46,14 +43,5 @@ mod tests {
         assert!(same_surface(2.0, 2.059));
         assert!(!same_surface(2.0, 2.061));
         assert!(!same_surface(1.0, 3.0));
-    }
-
-    #[test]
-    fn validity() {
-        assert!(is_valid_depth(0.5));
-        assert!(!is_valid_depth(0.0));
-        assert!(!is_valid_depth(-1.0));
-        assert!(!is_valid_depth(f32::NAN));
-        assert!(!is_valid_depth(f32::INFINITY));
     }
 }

@@ -27,7 +27,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use clap::{Parser, Subcommand};
-use dear_pipeline::capture::CaptureDir;
+use dear_capture::CaptureDir;
 use dear_pipeline::evaluate::BundleMethod;
 use dear_pipeline::is_valid_depth;
 use dear_pipeline::model::ModelBundle;

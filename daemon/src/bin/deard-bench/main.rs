@@ -20,8 +20,7 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::Parser;
-use dear_pipeline::capture::CaptureDir;
-use dear_pipeline::RgbdFrame;
+use dear_capture::{CaptureDir, RgbdFrame};
 use dear_proto::{flags, FrameHeader, Stage};
 use deard::config::{CalibrationMode, NetworkPlacement, PipelineConfig, RefineMode};
 use deard::processing::{FrameOutput, Processor};

@@ -1,4 +1,5 @@
-//! In-memory images of one RGB-D frame, shared by every stage of the pipeline.
+//! In-memory images of one RGB-D frame: what the capture reader yields and every stage of the
+//! pipeline shares.
 //!
 //! Layouts (row-major, `(row, column)` indexing as ndarray does):
 //! - depth maps: `Array2<f32>` `(H, W)`, metres, `0.0` = invalid;
@@ -10,6 +11,13 @@
 use ndarray::{Array2, Array3};
 
 use crate::calibration::Calibration;
+
+/// A depth sample is valid when it is positive and finite: `0` marks "no measurement" on disk
+/// and in memory, and a writer stores any other invalid value as `0`.
+#[inline]
+pub fn is_valid_depth(z: f32) -> bool {
+    z > 0.0 && z.is_finite()
+}
 
 /// A dense 2-D flow on a pixel grid: pixel `p` of the grid maps to `p + (u(p), v(p))`.
 #[derive(Debug, Clone, PartialEq)]
@@ -95,5 +103,19 @@ impl RgbdFrame {
     /// `(height, width)`.
     pub fn dim(&self) -> (usize, usize) {
         self.depth.dim()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_valid_depth;
+
+    #[test]
+    fn valid_depth_is_positive_and_finite() {
+        assert!(is_valid_depth(0.5));
+        assert!(!is_valid_depth(0.0));
+        assert!(!is_valid_depth(-1.0));
+        assert!(!is_valid_depth(f32::NAN));
+        assert!(!is_valid_depth(f32::INFINITY));
     }
 }

@@ -3,11 +3,11 @@
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use super::error::CaptureError;
-use super::layout::{FramePaths, FRAMES_DIR, MANIFEST_FILE};
-use super::manifest::{CaptureManifest, FrameEntry};
-use super::{flo, png};
+use crate::error::CaptureError;
 use crate::frame::RgbdFrame;
+use crate::layout::{FramePaths, FRAMES_DIR, MANIFEST_FILE};
+use crate::manifest::{CaptureManifest, FrameEntry};
+use crate::{flo, png};
 
 /// Writes frames into a new capture directory; [`CaptureWriter::finish`] writes the manifest.
 /// The manifest is written last (atomically), so a directory with a `capture.json` is complete.
@@ -103,6 +103,14 @@ impl CaptureWriter {
     pub fn write_manifest(&self) -> Result<(), CaptureError> {
         let path = self.root.join(MANIFEST_FILE);
         let tmp = self.root.join(format!("{MANIFEST_FILE}.tmp"));
+        // What the reader would refuse is not written: a bad manifest (a side of 0, a frame id
+        // past the 6-digit names) is the writer's error, named now, not the next reader's.
+        self.manifest
+            .validate()
+            .map_err(|message| CaptureError::Encode {
+                path: path.clone(),
+                message,
+            })?;
         let text =
             serde_json::to_string_pretty(&self.manifest).map_err(|e| CaptureError::Encode {
                 path: path.clone(),

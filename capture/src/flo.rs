@@ -2,7 +2,9 @@
 //! as little-endian i32, then `(u, v)` pairs as little-endian f32, row-major.
 //!
 //! Values with magnitude above 1e9 mean "unknown" in the Middlebury convention; the reader
-//! returns them as they are and [`UNKNOWN_FLOW`] is what writers use for invalid pixels.
+//! returns them as they are and [`UNKNOWN_FLOW`] is what writers use for invalid pixels. NaN and
+//! infinity are not a convention of the format: a file holding them is refused (by the Python
+//! reader too), so no ground truth reaches a metric or a loss as NaN.
 
 use std::fs::{self, File};
 use std::io::Read;
@@ -10,9 +12,9 @@ use std::path::Path;
 
 use ndarray::Array2;
 
-use super::error::CaptureError;
-use super::manifest::MAX_SIDE;
+use crate::error::CaptureError;
 use crate::frame::Flow;
+use crate::manifest::MAX_SIDE;
 
 const MAGIC: f32 = 202021.25;
 /// Middlebury's "unknown flow" value (anything above 1e9 is treated as unknown).
@@ -103,9 +105,18 @@ pub fn read_flo(path: &Path, size: Option<(u32, u32)>) -> Result<Flow, CaptureEr
     let n = data_len / PIXEL_BYTES as usize;
     let mut u = Vec::with_capacity(n);
     let mut v = Vec::with_capacity(n);
-    for pair in data.chunks_exact(PIXEL_BYTES as usize) {
-        u.push(f32::from_le_bytes([pair[0], pair[1], pair[2], pair[3]]));
-        v.push(f32::from_le_bytes([pair[4], pair[5], pair[6], pair[7]]));
+    for (i, pair) in data.chunks_exact(PIXEL_BYTES as usize).enumerate() {
+        let pu = f32::from_le_bytes([pair[0], pair[1], pair[2], pair[3]]);
+        let pv = f32::from_le_bytes([pair[4], pair[5], pair[6], pair[7]]);
+        if let Some(bad) = [pu, pv].into_iter().find(|x| !x.is_finite()) {
+            let (row, col) = (i / w as usize, i % w as usize);
+            return Err(format_err(
+                "finite flow values (1e10 marks unknown)",
+                format!("{bad} at row {row}, column {col}"),
+            ));
+        }
+        u.push(pu);
+        v.push(pv);
     }
     let shape = (h as usize, w as usize);
     Ok(Flow {
@@ -135,4 +146,30 @@ pub fn write_flo(path: &Path, flow: &Flow) -> Result<(), CaptureError> {
         bytes.extend_from_slice(&v.to_le_bytes());
     }
     fs::write(path, bytes).map_err(|e| CaptureError::io(path, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_non_finite_flow_value_is_refused_naming_file_and_pixel() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("000000.flow.flo");
+        let mut flow = Flow::zeros(2, 3);
+        flow.u[(0, 2)] = UNKNOWN_FLOW;
+        write_flo(&path, &flow).unwrap();
+        assert_eq!(
+            read_flo(&path, Some((3, 2))).unwrap(),
+            flow,
+            "1e10 is a value"
+        );
+        flow.v[(1, 1)] = f32::NAN;
+        write_flo(&path, &flow).unwrap();
+        let msg = read_flo(&path, Some((3, 2))).unwrap_err().to_string();
+        assert!(
+            msg.contains("000000.flow.flo") && msg.contains("NaN at row 1, column 1"),
+            "{msg}"
+        );
+    }
 }

@@ -5,19 +5,27 @@
 //! paper), `c_x, c_y` in pixels, `z` in metres. A pixel `p` of the RGB image sees the ToF pixel
 //! `p + W(p)`.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the depth-dependent flow between the RGB and the ToF image.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+///
+/// In `capture.json` each parameter must be finite as an f32: serde reads `1e39` as infinity,
+/// which aligns no pixel, so the reader refuses it and the schema bounds it.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Calibration {
     /// Horizontal baseline times focal length, px·m.
+    #[schemars(range(min = -f32::MAX, max = f32::MAX))]
     pub tx: f32,
     /// Vertical baseline times focal length, px·m.
+    #[schemars(range(min = -f32::MAX, max = f32::MAX))]
     pub ty: f32,
     /// Horizontal principal-point offset, px.
+    #[schemars(range(min = -f32::MAX, max = f32::MAX))]
     pub cx: f32,
     /// Vertical principal-point offset, px.
+    #[schemars(range(min = -f32::MAX, max = f32::MAX))]
     pub cy: f32,
 }
 
@@ -34,7 +42,7 @@ impl Calibration {
     /// Returns `None` for a non-positive or non-finite depth (no valid flow there).
     #[inline]
     pub fn flow_at(&self, z: f32) -> Option<(f32, f32)> {
-        if crate::geometry::is_valid_depth(z) {
+        if crate::frame::is_valid_depth(z) {
             Some((self.tx / z + self.cx, self.ty / z + self.cy))
         } else {
             None

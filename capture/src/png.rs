@@ -14,8 +14,8 @@ use image::codecs::png::PngDecoder;
 use image::{ColorType, DynamicImage, ImageBuffer, ImageDecoder, Limits, Luma, Rgb};
 use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayViewMut2};
 
-use super::error::CaptureError;
-use super::manifest::MAX_SIDE;
+use crate::error::CaptureError;
+use crate::manifest::MAX_SIDE;
 
 /// Bytes the decoder may hold besides the image itself: metadata chunks it keeps (text, ICC
 /// profile) and row buffers. A camera writes a few KiB of metadata; the bound stops a crafted
@@ -230,7 +230,7 @@ pub fn write_mask(path: &Path, mask: ArrayView2<bool>) -> Result<(), CaptureErro
 /// negative or non-finite depth → 0).
 pub fn depth_to_u16(depth: ArrayView2<f32>, scale: f32) -> Array2<u16> {
     depth.mapv(|z| {
-        if crate::geometry::is_valid_depth(z) {
+        if crate::frame::is_valid_depth(z) {
             (z / scale).round().clamp(0.0, 65535.0) as u16
         } else {
             0
@@ -267,7 +267,7 @@ pub fn quantize_as_stored(
     depth_scale: f32,
 ) {
     depth.mapv_inplace(|z| {
-        if crate::geometry::is_valid_depth(z) {
+        if crate::frame::is_valid_depth(z) {
             (z / depth_scale).round().clamp(0.0, 65535.0) as u16 as f32 * depth_scale
         } else {
             0.0

@@ -1,0 +1,32 @@
+//! `dear-capture`: the capture-directory format (docs/design.md, "Capture directory format"),
+//! one format for simulator output, recordings, replay, evaluation and training.
+//!
+//! - [`manifest`]: `capture.json`, its types and the rules it is validated by;
+//! - [`schema`]: the JSON Schema of `capture.json`, generated from those types (checked in as
+//!   `schema/capture.schema.json`, what the Python reader validates against);
+//! - [`reader`] opens and validates a directory, [`writer`] creates one;
+//! - [`png`] and [`flo`] are the per-file codecs, [`layout`] names the files;
+//! - [`frame`]: the in-memory frame the reader yields, and [`calibration`] the weak-calibration
+//!   model its ground truth is given in.
+//!
+//! Every error names the file it is about ([`CaptureError::path`]). The crate knows nothing of
+//! the algorithm: `dear-pipeline` re-exports it as `dear_pipeline::capture`.
+
+pub mod calibration;
+pub mod error;
+pub mod flo;
+pub mod frame;
+pub mod layout;
+pub mod manifest;
+pub mod png;
+pub mod reader;
+pub mod schema;
+pub mod writer;
+
+pub use calibration::Calibration;
+pub use error::CaptureError;
+pub use frame::{is_valid_depth, Flow, RgbdFrame};
+pub use layout::FramePaths;
+pub use manifest::{CaptureManifest, FrameEntry, Intrinsics};
+pub use reader::CaptureDir;
+pub use writer::CaptureWriter;
