@@ -43,7 +43,9 @@ impl Flow {
     }
 }
 
-/// One frame of a ToF RGB-D module as recorded or simulated, plus optional ground truth.
+/// One frame of a ToF RGB-D module: the sensor planes a camera delivers, what the daemon
+/// processes and a recording holds. Ground truth, which only a simulator or a lab knows, is a
+/// separate [`GroundTruth`]; the two travel together as a [`Sample`].
 #[derive(Debug, Clone)]
 pub struct RgbdFrame {
     /// Frame number within its capture.
@@ -56,20 +58,11 @@ pub struct RgbdFrame {
     pub amplitude: Array2<f32>,
     /// ToF depth `(H, W)` in metres, `0` = invalid, on the (weakly calibrated) RGB grid.
     pub depth: Array2<f32>,
-    /// Optional ground-truth depth in the RGB view, metres.
-    pub gt_depth: Option<Array2<f32>>,
-    /// Optional confidence / validity mask.
-    pub mask: Option<Array2<bool>>,
-    /// Optional ground-truth flow RGB → ToF.
-    pub flow: Option<Flow>,
-    /// The true misalignment parameters of this frame, when known.
-    pub perturbation: Option<Calibration>,
 }
 
 impl RgbdFrame {
-    /// A frame of sensor planes only, as a camera or a replay of its planes yields it (no
-    /// ground truth, no known perturbation).
-    pub fn sensor(
+    /// A frame of sensor planes.
+    pub fn new(
         index: u64,
         timestamp_ns: u64,
         rgb: Array3<u8>,
@@ -82,27 +75,42 @@ impl RgbdFrame {
             rgb,
             amplitude,
             depth,
-            gt_depth: None,
-            mask: None,
-            flow: None,
-            perturbation: None,
         }
-    }
-
-    /// A copy of the sensor planes (ground truth and perturbation left out).
-    pub fn sensor_copy(&self) -> Self {
-        RgbdFrame::sensor(
-            self.index,
-            self.timestamp_ns,
-            self.rgb.clone(),
-            self.amplitude.clone(),
-            self.depth.clone(),
-        )
     }
 
     /// `(height, width)`.
     pub fn dim(&self) -> (usize, usize) {
         self.depth.dim()
+    }
+}
+
+/// What is known about a frame beyond its sensor planes (a simulator's output, a lab capture):
+/// each part is optional, as each is an optional file of a capture.
+#[derive(Debug, Clone, Default)]
+pub struct GroundTruth {
+    /// Ground-truth depth in the RGB view, metres (`0` = unknown).
+    pub depth: Option<Array2<f32>>,
+    /// Pixels where the ground truth is trusted.
+    pub mask: Option<Array2<bool>>,
+    /// Ground-truth flow RGB → ToF.
+    pub flow: Option<Flow>,
+    /// The true misalignment parameters of this frame.
+    pub perturbation: Option<Calibration>,
+}
+
+/// A frame with its ground truth: what evaluation and training read, and the simulator writes.
+#[derive(Debug, Clone)]
+pub struct Sample {
+    /// The sensor planes.
+    pub frame: RgbdFrame,
+    /// What is known about them.
+    pub truth: GroundTruth,
+}
+
+impl Sample {
+    /// `(height, width)`.
+    pub fn dim(&self) -> (usize, usize) {
+        self.frame.dim()
     }
 }
 

@@ -6,8 +6,8 @@
 //!   `schema/capture.schema.json`, what the Python reader validates against);
 //! - [`reader`] opens and validates a directory, [`writer`] creates one;
 //! - [`png`] and [`flo`] are the per-file codecs, [`layout`] names the files;
-//! - [`frame`]: the in-memory frame the reader yields, and [`calibration`] the weak-calibration
-//!   model its ground truth is given in.
+//! - [`frame`]: the in-memory sensor frame, its ground truth and the two together (a
+//!   [`Sample`]), and [`calibration`] the weak-calibration model the ground truth is given in.
 //!
 //! Every error names the file it is about ([`CaptureError::path`]). The crate knows nothing of
 //! the algorithm: `dear-pipeline` re-exports it as `dear_pipeline::capture`.
@@ -25,7 +25,7 @@ pub mod writer;
 
 pub use calibration::Calibration;
 pub use error::CaptureError;
-pub use frame::{is_valid_depth, Flow, RgbdFrame};
+pub use frame::{is_valid_depth, Flow, GroundTruth, RgbdFrame, Sample};
 pub use layout::FramePaths;
 pub use manifest::{CaptureManifest, FrameEntry, Intrinsics};
 pub use reader::CaptureDir;

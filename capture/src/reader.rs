@@ -4,7 +4,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use crate::error::CaptureError;
-use crate::frame::RgbdFrame;
+use crate::frame::{GroundTruth, RgbdFrame, Sample};
 use crate::layout::{FramePaths, MANIFEST_FILE};
 use crate::manifest::CaptureManifest;
 use crate::{flo, png};
@@ -60,31 +60,33 @@ impl CaptureDir {
         (0..self.len()).all(|i| self.frame_paths(i).gt_depth.is_file())
     }
 
-    /// Reads and checks the frame at `position` (0-based index into the manifest's frame list).
-    /// Optional files (ground truth, mask, flow) are read when present: what evaluation and
-    /// training need.
+    /// Reads and checks the frame at `position` (0-based index into the manifest's frame list)
+    /// with its ground truth: the optional files (ground-truth depth, mask, flow) when present
+    /// and the manifest's perturbation. What evaluation and training need.
+    ///
+    /// # Panics
+    /// If `position >= self.len()` (a programming error, not a data error).
+    pub fn read_sample(&self, position: usize) -> Result<Sample, CaptureError> {
+        let frame = self.read_frame(position)?;
+        let paths = self.frame_paths(position);
+        let size = Some(self.size());
+        let scale = self.manifest.depth_scale;
+        let truth = GroundTruth {
+            depth: optional(&paths.gt_depth, |p| png::read_depth(p, size, scale))?,
+            mask: optional(&paths.mask, |p| png::read_mask(p, size))?,
+            flow: optional(&paths.flow, |p| flo::read_flo(p, size))?,
+            perturbation: self.manifest.frames[position].perturbation,
+        };
+        Ok(Sample { frame, truth })
+    }
+
+    /// Reads and checks only what a sensor delivers at `position`: RGB, amplitude and depth.
+    /// What the daemon's replay needs: it decodes three PNGs a frame instead of up to five plus
+    /// a `.flo`, and a damaged ground-truth file does not cost it a good frame.
     ///
     /// # Panics
     /// If `position >= self.len()` (a programming error, not a data error).
     pub fn read_frame(&self, position: usize) -> Result<RgbdFrame, CaptureError> {
-        let mut frame = self.read_sensor_frame(position)?;
-        let paths = self.frame_paths(position);
-        let size = Some(self.size());
-        let scale = self.manifest.depth_scale;
-        frame.gt_depth = optional(&paths.gt_depth, |p| png::read_depth(p, size, scale))?;
-        frame.mask = optional(&paths.mask, |p| png::read_mask(p, size))?;
-        frame.flow = optional(&paths.flow, |p| flo::read_flo(p, size))?;
-        Ok(frame)
-    }
-
-    /// Reads and checks only what a sensor delivers at `position`: RGB, amplitude and depth
-    /// (ground truth, mask and flow stay `None`; the manifest's perturbation is kept, it is
-    /// metadata). What the daemon's replay needs: it decodes three PNGs a frame instead of up
-    /// to five plus a `.flo`, and a damaged ground-truth file does not cost it a good frame.
-    ///
-    /// # Panics
-    /// If `position >= self.len()` (a programming error, not a data error).
-    pub fn read_sensor_frame(&self, position: usize) -> Result<RgbdFrame, CaptureError> {
         let entry = &self.manifest.frames[position];
         let paths = FramePaths::new(&self.root, entry.id);
         let size = Some(self.size());
@@ -92,10 +94,13 @@ impl CaptureDir {
         let rgb = png::read_rgb(&paths.rgb, size)?;
         let amplitude = png::read_u16(&paths.amplitude, size)?.mapv(f32::from);
         let depth = png::read_depth(&paths.depth, size, scale)?;
-        Ok(RgbdFrame {
-            perturbation: entry.perturbation,
-            ..RgbdFrame::sensor(entry.id, entry.timestamp_ns, rgb, amplitude, depth)
-        })
+        Ok(RgbdFrame::new(
+            entry.id,
+            entry.timestamp_ns,
+            rgb,
+            amplitude,
+            depth,
+        ))
     }
 }
 

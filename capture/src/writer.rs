@@ -4,7 +4,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use crate::error::CaptureError;
-use crate::frame::RgbdFrame;
+use crate::frame::{GroundTruth, RgbdFrame};
 use crate::layout::{FramePaths, FRAMES_DIR, MANIFEST_FILE};
 use crate::manifest::{CaptureManifest, FrameEntry};
 use crate::{flo, png};
@@ -54,8 +54,19 @@ impl CaptureWriter {
         self.manifest.frames.is_empty()
     }
 
-    /// Writes one frame's files (the optional ones when present) and lists it in the manifest.
+    /// Writes one frame's sensor planes and lists it in the manifest (a recording: no ground
+    /// truth).
     pub fn write_frame(&mut self, frame: &RgbdFrame) -> Result<(), CaptureError> {
+        self.write_sample(frame, &GroundTruth::default())
+    }
+
+    /// Writes one frame's files, the ground truth's when present, and lists it in the
+    /// manifest with its perturbation.
+    pub fn write_sample(
+        &mut self,
+        frame: &RgbdFrame,
+        truth: &GroundTruth,
+    ) -> Result<(), CaptureError> {
         let paths = FramePaths::new(&self.root, frame.index);
         let (h, w) = frame.dim();
         if (w as u32, h as u32) != (self.manifest.width, self.manifest.height) {
@@ -80,19 +91,19 @@ impl CaptureWriter {
         png::write_rgb(&paths.rgb, frame.rgb.view())?;
         png::write_amplitude(&paths.amplitude, frame.amplitude.view())?;
         png::write_depth(&paths.depth, frame.depth.view(), scale)?;
-        if let Some(gt) = &frame.gt_depth {
+        if let Some(gt) = &truth.depth {
             png::write_depth(&paths.gt_depth, gt.view(), scale)?;
         }
-        if let Some(mask) = &frame.mask {
+        if let Some(mask) = &truth.mask {
             png::write_mask(&paths.mask, mask.view())?;
         }
-        if let Some(flow) = &frame.flow {
+        if let Some(flow) = &truth.flow {
             flo::write_flo(&paths.flow, flow)?;
         }
         self.manifest.frames.push(FrameEntry {
             id: frame.index,
             timestamp_ns: frame.timestamp_ns,
-            perturbation: frame.perturbation,
+            perturbation: truth.perturbation,
         });
         Ok(())
     }

@@ -7,7 +7,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use dear_capture::manifest::CaptureManifest;
-use dear_capture::{png, Calibration, CaptureDir, CaptureError, Flow, RgbdFrame};
+use dear_capture::{png, Calibration, CaptureDir, CaptureError, Flow, Sample};
 use serde_json::Value;
 
 fn repo() -> PathBuf {
@@ -116,7 +116,8 @@ fn digest(values: impl IntoIterator<Item = u64>) -> Value {
 }
 
 /// The frame's planes as the integers stored, under the fixtures' names (`None`: no file).
-fn stored_planes(f: &RgbdFrame, scale: f32) -> [(&'static str, Option<Vec<u64>>); 5] {
+fn stored_planes(s: &Sample, scale: f32) -> [(&'static str, Option<Vec<u64>>); 5] {
+    let (f, truth) = (&s.frame, &s.truth);
     let bytes = |v: &u8| u64::from(*v);
     [
         ("rgb", Some(f.rgb.iter().map(bytes).collect())),
@@ -124,11 +125,12 @@ fn stored_planes(f: &RgbdFrame, scale: f32) -> [(&'static str, Option<Vec<u64>>)
         ("depth_units", Some(depth_units(&f.depth, scale))),
         (
             "gt_depth_units",
-            f.gt_depth.as_ref().map(|g| depth_units(g, scale)),
+            truth.depth.as_ref().map(|g| depth_units(g, scale)),
         ),
         (
             "mask",
-            f.mask
+            truth
+                .mask
                 .as_ref()
                 .map(|m| m.iter().map(|&v| u64::from(v)).collect()),
         ),
@@ -136,12 +138,16 @@ fn stored_planes(f: &RgbdFrame, scale: f32) -> [(&'static str, Option<Vec<u64>>)
 }
 
 /// Id, timestamp and perturbation of the frame as the fixture lists them.
-fn check_entry(f: &RgbdFrame, want: &Value) {
-    let id = f.index;
+fn check_entry(s: &Sample, want: &Value) {
+    let id = s.frame.index;
     assert_eq!(id, u64_of(&want["id"]));
-    assert_eq!(f.timestamp_ns, u64_of(&want["timestamp_ns"]), "frame {id}");
+    assert_eq!(
+        s.frame.timestamp_ns,
+        u64_of(&want["timestamp_ns"]),
+        "frame {id}"
+    );
     let perturbation = calibration(&want["perturbation"]);
-    assert_eq!(f.perturbation, perturbation, "frame {id}");
+    assert_eq!(s.truth.perturbation, perturbation, "frame {id}");
 }
 
 #[test]
@@ -155,12 +161,13 @@ fn rust_reads_samples_demo_as_the_digest_says() {
     let (w, h) = cap.size();
     let scale = cap.manifest().depth_scale;
     for (i, want) in frames.iter().enumerate() {
-        let f = cap.read_frame(i).unwrap();
-        check_entry(&f, want);
-        assert_eq!(f.flow.is_some(), want["has_flow"].as_bool().unwrap());
+        let s = cap.read_sample(i).unwrap();
+        check_entry(&s, want);
+        let f = &s.frame;
+        assert_eq!(s.truth.flow.is_some(), want["has_flow"].as_bool().unwrap());
         assert_eq!(f.rgb.dim(), (h as usize, w as usize, 3));
         assert_eq!(f.depth.dim(), (h as usize, w as usize));
-        for (name, got) in stored_planes(&f, scale) {
+        for (name, got) in stored_planes(&s, scale) {
             let got = got.map_or(Value::Null, digest);
             assert_eq!(got, want[name], "frame {}: {name}", f.index);
         }
@@ -185,13 +192,15 @@ fn check_values(id: u64, name: &str, got: Option<Vec<f64>>, want: &Value) {
     assert_eq!(got, want, "frame {id}: {name}");
 }
 
-fn check_known_frame(f: &RgbdFrame, want: &Value, scale: f32) {
-    check_entry(f, want);
-    for (name, got) in stored_planes(f, scale) {
+fn check_known_frame(s: &Sample, want: &Value, scale: f32) {
+    check_entry(s, want);
+    let f = &s.frame;
+    for (name, got) in stored_planes(s, scale) {
         check_values(f.index, name, got.map(as_f64), &want[name]);
     }
     let flow = |component: fn(&Flow) -> &ndarray::Array2<f32>| {
-        f.flow
+        s.truth
+            .flow
             .as_ref()
             .map(|fl| component(fl).iter().map(|&x| f64::from(x)).collect())
     };
@@ -209,7 +218,7 @@ fn rust_reads_the_capture_python_wrote_value_for_value() {
     let frames = want["frames"].as_array().unwrap();
     assert_eq!(cap.len(), frames.len());
     for (i, want) in frames.iter().enumerate() {
-        check_known_frame(&cap.read_frame(i).unwrap(), want, m.depth_scale);
+        check_known_frame(&cap.read_sample(i).unwrap(), want, m.depth_scale);
     }
 }
 

@@ -226,17 +226,13 @@ impl Dump {
             .publish_timestamp_ns
             .saturating_sub(self.first_publish_ns)
             .max(self.last_timestamp_ns);
-        let rgbd = RgbdFrame {
-            index: id,
+        let rgbd = RgbdFrame::new(
+            id,
             timestamp_ns,
-            rgb: frame.rgb_view().to_owned(),
-            amplitude: frame.confidence_view().mapv(|c| f32::from(c) * 257.0),
-            depth: frame.depth_view().to_owned(),
-            gt_depth: None,
-            mask: None,
-            flow: None,
-            perturbation: None,
-        };
+            frame.rgb_view().to_owned(),
+            frame.confidence_view().mapv(|c| f32::from(c) * 257.0),
+            frame.depth_view().to_owned(),
+        );
         drop(frame);
         self.writer
             .write_frame(&rgbd)

@@ -212,10 +212,11 @@ fn dump_writes_the_published_frames_as_a_capture() {
     let run_id = format!("{:016x}", publisher.run_id);
     let mut last_sequence = None;
     for i in 0..3 {
-        let frame = capture.read_frame(i).unwrap();
+        let sample = capture.read_sample(i).unwrap();
+        let frame = &sample.frame;
         assert_eq!(frame.index, i as u64);
         assert!(
-            frame.perturbation.is_none(),
+            sample.truth.perturbation.is_none(),
             "estimates are not ground truth"
         );
         // Frames may be lost (the queue overwrites), never reordered or repeated: the sequence

@@ -43,8 +43,8 @@ fn a_recording_of_a_replay_holds_the_same_sensor_frames() {
     assert_eq!(r.depth_scale, o.depth_scale);
     for k in 0..6 {
         let (a, b) = (
-            original.read_sensor_frame(k).unwrap(),
-            recorded.read_sensor_frame(k).unwrap(),
+            original.read_frame(k).unwrap(),
+            recorded.read_frame(k).unwrap(),
         );
         assert_eq!(a.rgb, b.rgb, "frame {k} rgb");
         assert_eq!(a.depth, b.depth, "frame {k} depth");

@@ -12,11 +12,11 @@ fn bench(c: &mut Criterion) {
     let demo = CaptureDir::open(concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo"))
         .expect("samples/demo");
     let mut group = c.benchmark_group("capture_read_320x240");
+    group.bench_function("read_sample", |b| {
+        b.iter(|| black_box(demo.read_sample(black_box(0)).unwrap()))
+    });
     group.bench_function("read_frame", |b| {
         b.iter(|| black_box(demo.read_frame(black_box(0)).unwrap()))
-    });
-    group.bench_function("read_sensor_frame", |b| {
-        b.iter(|| black_box(demo.read_sensor_frame(black_box(0)).unwrap()))
     });
     group.finish();
 }

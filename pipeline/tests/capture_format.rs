@@ -4,7 +4,7 @@
 use std::fs;
 
 use dear_pipeline::capture::{
-    png, CaptureDir, CaptureError, CaptureManifest, CaptureWriter, Intrinsics,
+    png, CaptureDir, CaptureError, CaptureManifest, CaptureWriter, GroundTruth, Intrinsics, Sample,
 };
 use dear_pipeline::{Calibration, Flow, RgbdFrame};
 use ndarray::{Array2, Array3};
@@ -12,7 +12,7 @@ use ndarray::{Array2, Array3};
 const W: usize = 8;
 const H: usize = 6;
 
-fn frame(index: u64) -> RgbdFrame {
+fn sample(index: u64) -> Sample {
     let rgb = Array3::from_shape_fn((H, W, 3), |(r, c, k)| {
         (r * 40 + c * 7 + k * 3 + index as usize) as u8
     });
@@ -27,21 +27,20 @@ fn frame(index: u64) -> RgbdFrame {
         u: Array2::from_shape_fn((H, W), |(r, c)| r as f32 * 0.25 - c as f32),
         v: Array2::from_shape_fn((H, W), |(r, c)| -(r as f32) + 0.5 * c as f32),
     };
-    RgbdFrame {
-        index,
-        timestamp_ns: index * 33_333_333,
-        rgb,
-        amplitude: Array2::from_shape_fn((H, W), |(r, c)| (r * 1000 + c) as f32),
-        depth: depth.clone(),
-        gt_depth: Some(depth.mapv(|z| z + 0.01)),
-        mask: Some(Array2::from_shape_fn((H, W), |(r, c)| (r + c) % 3 != 0)),
-        flow: Some(flow),
-        perturbation: Some(Calibration {
-            tx: 3.0,
-            ty: -1.0,
-            cx: 2.5,
-            cy: 0.5,
-        }),
+    let amplitude = Array2::from_shape_fn((H, W), |(r, c)| (r * 1000 + c) as f32);
+    Sample {
+        frame: RgbdFrame::new(index, index * 33_333_333, rgb, amplitude, depth.clone()),
+        truth: GroundTruth {
+            depth: Some(depth.mapv(|z| z + 0.01)),
+            mask: Some(Array2::from_shape_fn((H, W), |(r, c)| (r + c) % 3 != 0)),
+            flow: Some(flow),
+            perturbation: Some(Calibration {
+                tx: 3.0,
+                ty: -1.0,
+                cx: 2.5,
+                cy: 0.5,
+            }),
+        },
     }
 }
 
@@ -53,7 +52,8 @@ fn write_capture(dir: &std::path::Path, frames: u64) {
     );
     let mut writer = CaptureWriter::create(dir, manifest).unwrap();
     for i in 0..frames {
-        writer.write_frame(&frame(i)).unwrap();
+        let s = sample(i);
+        writer.write_sample(&s.frame, &s.truth).unwrap();
     }
     writer.finish().unwrap();
 }
@@ -66,25 +66,32 @@ fn round_trip_keeps_every_value() {
     let cap = CaptureDir::open(&dir).unwrap();
     assert_eq!(cap.len(), 3);
     assert!(cap.has_ground_truth());
-    let got = cap.read_frame(2).unwrap();
-    let want = frame(2);
+    let Sample { frame: got, truth } = cap.read_sample(2).unwrap();
+    let Sample {
+        frame: want,
+        truth: want_truth,
+    } = sample(2);
     assert_eq!(got.index, 2);
     assert_eq!(got.timestamp_ns, want.timestamp_ns);
     assert_eq!(got.rgb, want.rgb);
     assert_eq!(got.amplitude, want.amplitude);
-    assert_eq!(got.mask, want.mask);
-    assert_eq!(got.flow, want.flow);
-    assert_eq!(got.perturbation, want.perturbation);
+    assert_eq!(truth.mask, want_truth.mask);
+    assert_eq!(truth.flow, want_truth.flow);
+    assert_eq!(truth.perturbation, want_truth.perturbation);
     // Depth is quantised to millimetres on disk.
     for (a, b) in got.depth.iter().zip(want.depth.iter()) {
         assert!((a - b).abs() <= 0.0005 + 1e-6, "{a} vs {b}");
     }
     assert_eq!(got.depth[[0, 0]], 0.0, "invalid depth stays invalid");
-    let gt = got.gt_depth.unwrap();
-    assert!((gt[[1, 1]] - want.gt_depth.unwrap()[[1, 1]]).abs() <= 0.0005 + 1e-6);
+    let gt = truth.depth.unwrap();
+    assert!((gt[[1, 1]] - want_truth.depth.unwrap()[[1, 1]]).abs() <= 0.0005 + 1e-6);
 }
 
-fn expect_err_naming(result: Result<RgbdFrame, CaptureError>, file: &std::path::Path, what: &str) {
+fn expect_err_naming<T: std::fmt::Debug>(
+    result: Result<T, CaptureError>,
+    file: &std::path::Path,
+    what: &str,
+) {
     let err = result.expect_err("damaged frame must be an error");
     assert_eq!(err.path(), file, "error names the damaged file: {err}");
     let text = err.to_string();
@@ -107,8 +114,9 @@ fn the_sensor_read_ignores_ground_truth_and_reports_sensor_planes() {
     write_capture(&dir, 3);
     let cap = CaptureDir::open(&dir).unwrap();
 
-    let full = cap.read_frame(0).unwrap();
-    let sensor = cap.read_sensor_frame(0).unwrap();
+    let Sample { frame: full, truth } = cap.read_sample(0).unwrap();
+    assert!(truth.depth.is_some() && truth.mask.is_some() && truth.flow.is_some());
+    let sensor = cap.read_frame(0).unwrap();
     assert_eq!(sensor.rgb, full.rgb);
     assert_eq!(sensor.amplitude, full.amplitude);
     assert_eq!(sensor.depth, full.depth);
@@ -116,18 +124,16 @@ fn the_sensor_read_ignores_ground_truth_and_reports_sensor_planes() {
         (sensor.index, sensor.timestamp_ns),
         (full.index, full.timestamp_ns)
     );
-    assert_eq!(sensor.perturbation, full.perturbation);
-    assert!(sensor.gt_depth.is_none() && sensor.mask.is_none() && sensor.flow.is_none());
 
     fs::write(cap.frame_paths(1).gt_depth, b"not a png").unwrap();
     fs::write(cap.frame_paths(1).flow, b"PIEH").unwrap();
-    assert!(cap.read_frame(1).is_err());
-    cap.read_sensor_frame(1)
+    assert!(cap.read_sample(1).is_err());
+    cap.read_frame(1)
         .expect("a damaged ground truth does not cost the sensor frame");
 
     let depth = cap.frame_paths(2).depth;
     fs::write(&depth, b"not a png").unwrap();
-    expect_err_naming(cap.read_sensor_frame(2), &depth, "cannot decode");
+    expect_err_naming(cap.read_frame(2), &depth, "cannot decode");
 }
 
 #[test]
@@ -155,13 +161,13 @@ fn damaged_frames_are_reported_by_file() {
     // Wrong resolution.
     let gt = cap.frame_paths(3).gt_depth;
     png::write_depth(&gt, Array2::from_elem((H + 1, W), 1.0).view(), 0.001).unwrap();
-    expect_err_naming(cap.read_frame(3), &gt, "is 8x7");
+    expect_err_naming(cap.read_sample(3), &gt, "is 8x7");
 
     // Truncated flow file.
     let flo = cap.frame_paths(4).flow;
     let bytes = fs::read(&flo).unwrap();
     fs::write(&flo, &bytes[..bytes.len() - 4]).unwrap();
-    expect_err_naming(cap.read_frame(4), &flo, "bytes");
+    expect_err_naming(cap.read_sample(4), &flo, "bytes");
 }
 
 #[test]
@@ -218,6 +224,6 @@ fn writer_refuses_a_non_empty_directory_and_out_of_order_frames() {
     );
     assert!(CaptureWriter::create(&dir, manifest.clone()).is_err());
     let mut writer = CaptureWriter::create(tmp.path().join("b"), manifest).unwrap();
-    writer.write_frame(&frame(3)).unwrap();
-    assert!(writer.write_frame(&frame(2)).is_err());
+    writer.write_frame(&sample(3).frame).unwrap();
+    assert!(writer.write_frame(&sample(2).frame).is_err());
 }

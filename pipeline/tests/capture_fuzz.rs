@@ -128,12 +128,12 @@ fn check_frame_zero(cap: &CaptureDir) -> Result<(), TestCaseError> {
     }
     let (w, h) = cap.size();
     let bound = FRAME_ALLOC_BOUND.max(w as usize * h as usize * 3 * 2);
-    let (result, largest) = largest_allocation(|| cap.read_frame(0));
+    let (result, largest) = largest_allocation(|| cap.read_sample(0));
     prop_assert!(largest <= bound, "allocated {largest} bytes at once");
     match result {
-        Ok(frame) => {
-            prop_assert_eq!(frame.rgb.dim(), (h as usize, w as usize, 3));
-            prop_assert_eq!(frame.depth.dim(), (h as usize, w as usize));
+        Ok(sample) => {
+            prop_assert_eq!(sample.frame.rgb.dim(), (h as usize, w as usize, 3));
+            prop_assert_eq!(sample.frame.depth.dim(), (h as usize, w as usize));
         }
         Err(e) => {
             let frames = cap.root().join("frames");
@@ -260,12 +260,13 @@ fn damaged_png_planes_are_errors_naming_the_file() {
         planes.restore();
         let (path, original) = &planes.files[plane];
         fs::write(path, apply_bytes(original, &edits)).unwrap();
-        let (result, largest) = largest_allocation(|| cap.read_frame(0));
+        // With its ground truth: every one of the five planes is decoded.
+        let (result, largest) = largest_allocation(|| cap.read_sample(0));
         prop_assert!(largest <= FRAME_ALLOC_BOUND, "allocated {largest} bytes at once");
         match result {
             // A flip in an ancillary chunk or in a CRC the decoder does not need can leave the
             // image readable; then it has the capture's size.
-            Ok(frame) => prop_assert_eq!(frame.depth.dim(), (240, 320)),
+            Ok(sample) => prop_assert_eq!(sample.frame.depth.dim(), (240, 320)),
             Err(e) => {
                 prop_assert_eq!(e.path(), path.as_path(), "{}", e);
                 let name = path.file_name().unwrap().to_string_lossy().into_owned();

@@ -23,7 +23,7 @@ fn the_edge_check_measures_a_principal_point_offset_on_sensor_data() {
     let mut worst = 0.0f32;
     for position in [0, 14, 28] {
         let frame = capture.read_frame(position).unwrap();
-        let truth = frame
+        let truth = capture.manifest().frames[position]
             .perturbation
             .expect("the demo records its true calibration");
         let (h, w) = frame.depth.dim();

@@ -38,13 +38,14 @@ fn the_shipped_edge_bundle_is_trained_and_improves_the_sample() {
     let mut classical = MethodRunner::new(h, w, capture.manifest().initial_calibration);
     let mut eval = Evaluation::new();
     for position in [0, capture.len() / 2, capture.len() - 1] {
-        let frame = capture.read_frame(position).unwrap();
-        let valid = ground_truth_mask(&frame).unwrap();
-        let truth = ground_truth_flow(&frame);
-        let raw = classical.run(Method::RawTof, &frame).unwrap();
-        eval.add("input", &frame, &raw, valid.view(), truth.as_ref());
-        let out = chain.run(&frame).unwrap();
-        eval.add("edge", &frame, &out.refined, valid.view(), truth.as_ref());
+        let sample = capture.read_sample(position).unwrap();
+        let frame = &sample.frame;
+        let valid = ground_truth_mask(&sample).unwrap();
+        let truth = ground_truth_flow(&sample);
+        let raw = classical.run(Method::RawTof, &sample).unwrap();
+        eval.add("input", &sample, &raw, valid.view(), truth.as_ref());
+        let out = chain.run(frame).unwrap();
+        eval.add("edge", &sample, &out.refined, valid.view(), truth.as_ref());
     }
     let reports = eval.reports();
     let (input, edge) = (&reports[0], &reports[1]);
@@ -84,14 +85,15 @@ fn online_tracking_follows_the_drifting_sample() {
         })
         .collect();
     for position in 0..capture.len() {
-        let frame = capture.read_frame(position).unwrap();
-        let valid = ground_truth_mask(&frame).unwrap();
-        let truth = ground_truth_flow(&frame);
-        let fixed = classical.run(Method::StaticCalibration, &frame).unwrap();
-        eval.add("static", &frame, &fixed, valid.view(), truth.as_ref());
+        let sample = capture.read_sample(position).unwrap();
+        let frame = &sample.frame;
+        let valid = ground_truth_mask(&sample).unwrap();
+        let truth = ground_truth_flow(&sample);
+        let fixed = classical.run(Method::StaticCalibration, &sample).unwrap();
+        eval.add("static", &sample, &fixed, valid.view(), truth.as_ref());
         for (name, method, online) in &mut runs {
-            let (out, _) = method.run_online(&frame, online).unwrap();
-            eval.add(name, &frame, &out, valid.view(), truth.as_ref());
+            let (out, _) = method.run_online(frame, online).unwrap();
+            eval.add(name, &sample, &out, valid.view(), truth.as_ref());
         }
     }
     let aepe = |name: &str| {
@@ -143,8 +145,13 @@ fn the_shipped_refiner_bounds_its_change_to_clean_depth() {
     let mut scratch = Vec::new();
     let mut changes = Vec::new();
     for position in [0, capture.len() / 2, capture.len() - 1] {
-        let frame = capture.read_frame(position).unwrap();
-        let clean = frame.gt_depth.clone().expect("the sample has ground truth");
+        let sample = capture.read_sample(position).unwrap();
+        let frame = &sample.frame;
+        let clean = sample
+            .truth
+            .depth
+            .clone()
+            .expect("the sample has ground truth");
         normalize_amplitude_into(
             frame.amplitude.view(),
             clean.view(),
@@ -206,11 +213,12 @@ fn the_shipped_chain_finds_no_misalignment_in_aligned_frames() {
     let mut eval = Evaluation::new();
     for i in 0..4 {
         let scene = Scene::random(camera, &SceneConfig::default(), 4242, i);
-        let frame = simulate(&scene, &SimConfig::default(), 4242, i).into_frame(i, 0);
-        let valid = ground_truth_mask(&frame).unwrap();
-        let truth = ground_truth_flow(&frame);
-        let out = chain.run(&frame).unwrap();
-        eval.add("edge", &frame, &out.aligned, valid.view(), truth.as_ref());
+        let sample = simulate(&scene, &SimConfig::default(), 4242, i).into_capture_sample(i, 0);
+        let frame = &sample.frame;
+        let valid = ground_truth_mask(&sample).unwrap();
+        let truth = ground_truth_flow(&sample);
+        let out = chain.run(frame).unwrap();
+        eval.add("edge", &sample, &out.aligned, valid.view(), truth.as_ref());
     }
     let aepe = eval.reports()[0].aepe_px.unwrap();
     println!("AEPE of the shipped chain on 4 aligned frames: {aepe:.3} px");

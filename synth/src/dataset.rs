@@ -81,8 +81,9 @@ pub fn generate(
     for i in 0..params.count {
         let scene = Scene::random(camera, &params.scene, params.seed, i as u64);
         let sample = simulate(&scene, &params.sim, params.seed, i as u64);
+        let sample = sample.into_capture_sample(i as u64, i as u64 * FRAME_INTERVAL_NS);
         writer
-            .write_frame(&sample.into_frame(i as u64, i as u64 * FRAME_INTERVAL_NS))
+            .write_sample(&sample.frame, &sample.truth)
             .with_context(|| format!("writing frame {i}"))?;
         progress(i + 1);
     }

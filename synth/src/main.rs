@@ -320,8 +320,8 @@ fn main() -> Result<()> {
         } => {
             let dir = CaptureDir::open(&capture)
                 .with_context(|| format!("opening {}", capture.display()))?;
-            let f = dir.read_frame(frame)?;
-            panel(&f, error_range, scale)
+            let sample = dir.read_sample(frame)?;
+            panel(&sample, error_range, scale)
                 .save(&out)
                 .with_context(|| format!("writing {}", out.display()))?;
             eprintln!("wrote {}", out.display());

@@ -21,7 +21,7 @@
 use std::path::Path;
 
 use anyhow::{ensure, Context, Result};
-use dear_capture::{Calibration, CaptureDir, CaptureWriter, RgbdFrame};
+use dear_capture::{Calibration, CaptureDir, CaptureWriter, GroundTruth, RgbdFrame, Sample};
 use dear_pipeline::geometry::synthesize_view;
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
@@ -120,23 +120,29 @@ pub fn draw(
 }
 
 /// Misaligns an aligned frame by `p`: RGB, ground truth and mask move to the synthesized view;
-/// ToF amplitude and depth stay. The frame must have ground-truth depth.
-pub fn apply(frame: &RgbdFrame, p: Calibration) -> Result<RgbdFrame> {
-    let gt = frame
-        .gt_depth
+/// ToF amplitude and depth stay. The sample must have ground-truth depth.
+pub fn apply(sample: &Sample, p: Calibration) -> Result<Sample> {
+    let frame = &sample.frame;
+    let gt = sample
+        .truth
+        .depth
         .as_ref()
         .context("frame has no ground-truth depth to splat")?;
     let view = synthesize_view(frame.rgb.view(), gt.view(), &p);
-    Ok(RgbdFrame {
-        index: frame.index,
-        timestamp_ns: frame.timestamp_ns,
-        rgb: view.rgb,
-        amplitude: frame.amplitude.clone(),
-        depth: frame.depth.clone(),
-        gt_depth: Some(view.depth),
-        mask: Some(view.valid),
-        flow: Some(view.flow),
-        perturbation: Some(p),
+    Ok(Sample {
+        frame: RgbdFrame::new(
+            frame.index,
+            frame.timestamp_ns,
+            view.rgb,
+            frame.amplitude.clone(),
+            frame.depth.clone(),
+        ),
+        truth: GroundTruth {
+            depth: Some(view.depth),
+            mask: Some(view.valid),
+            flow: Some(view.flow),
+            perturbation: Some(p),
+        },
     })
 }
 
@@ -170,11 +176,13 @@ pub fn perturb_dir(
         .with_context(|| format!("creating {}", output.display()))?;
     let n = dir.len();
     for pos in 0..n {
-        let frame = dir
-            .read_frame(pos)
+        let sample = dir
+            .read_sample(pos)
             .with_context(|| format!("reading frame {pos}"))?;
-        let gt = frame
-            .gt_depth
+        let frame = &sample.frame;
+        let gt = sample
+            .truth
+            .depth
             .as_ref()
             .with_context(|| format!("frame {pos} has no ground truth"))?;
         let median = median_valid(gt).unwrap_or(1.0);
@@ -188,7 +196,8 @@ pub fn perturb_dir(
             src.intrinsics.fx as f64,
             median,
         );
-        writer.write_frame(&apply(&frame, p)?)?;
+        let perturbed = apply(&sample, p)?;
+        writer.write_sample(&perturbed.frame, &perturbed.truth)?;
         progress(pos + 1, n);
     }
     writer.finish()?;

@@ -8,7 +8,7 @@
 //! frame it shows the misalignment as well as the ToF errors. Amplitude is shown as
 //! `√(a / a₉₉)` (grey).
 
-use dear_capture::{is_valid_depth, RgbdFrame};
+use dear_capture::{is_valid_depth, Sample};
 use dear_picture::depth::{depth_colors, display_range, signed_error_colors};
 use dear_picture::panel::{hstack, scaled};
 use dear_picture::tile::{amplitude_image, rgb_image};
@@ -17,8 +17,9 @@ use ndarray::Zip;
 
 /// Builds the five-tile preview of a frame, each tile scaled by `scale`. Without ground truth
 /// the ToF depth is its own reference (its error tile is white where valid).
-pub fn panel(frame: &RgbdFrame, error_range_m: f32, scale: f64) -> RgbImage {
-    let gt = frame.gt_depth.as_ref().unwrap_or(&frame.depth);
+pub fn panel(sample: &Sample, error_range_m: f32, scale: f64) -> RgbImage {
+    let frame = &sample.frame;
+    let gt = sample.truth.depth.as_ref().unwrap_or(&frame.depth);
     let range = Some(display_range(gt.view(), None));
     let error = Zip::from(&frame.depth).and(gt).map_collect(|&tof, &gt| {
         if is_valid_depth(tof) && is_valid_depth(gt) {
@@ -40,25 +41,29 @@ pub fn panel(frame: &RgbdFrame, error_range_m: f32, scale: f64) -> RgbImage {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use dear_capture::{GroundTruth, RgbdFrame};
     use dear_picture::panel::{BACKGROUND, GAP};
     use ndarray::{Array2, Array3};
 
     /// A 4×6 frame: ToF 1 m left, 3 m right, 10 cm too far in the top row; ground truth 1 m
     /// left, 3 m right.
-    fn frame() -> RgbdFrame {
+    fn frame() -> Sample {
         let gt = Array2::from_shape_fn((4, 6), |(_, c)| if c < 3 { 1.0 } else { 3.0 });
         let mut depth = gt.clone();
         depth.row_mut(0).map_inplace(|z| *z += 0.1);
         depth[(3, 5)] = 0.0;
-        let mut frame = RgbdFrame::sensor(
+        let frame = RgbdFrame::new(
             0,
             0,
             Array3::from_elem((4, 6, 3), 90u8),
             Array2::from_elem((4, 6), 50.0),
             depth,
         );
-        frame.gt_depth = Some(gt);
-        frame
+        let truth = GroundTruth {
+            depth: Some(gt),
+            ..GroundTruth::default()
+        };
+        Sample { frame, truth }
     }
 
     #[test]
@@ -71,9 +76,9 @@ mod tests {
         assert_eq!(tile(1, 0, 0), [255, 255, 255], "flat amplitude is white");
         assert_eq!(img.get_pixel(6, 0).0, BACKGROUND.0, "gap");
         // ToF and ground truth share the ground truth's 1 … 3 m scale: equal depth, equal colour.
-        let range = display_range(frame.gt_depth.as_ref().unwrap().view(), None);
+        let range = display_range(frame.truth.depth.as_ref().unwrap().view(), None);
         assert_eq!(range, (1.0, 3.0));
-        let gt_colors = depth_colors(frame.gt_depth.as_ref().unwrap().view(), Some(range));
+        let gt_colors = depth_colors(frame.truth.depth.as_ref().unwrap().view(), Some(range));
         assert_eq!(tile(2, 0, 1), gt_colors.get_pixel(0, 1).0);
         assert_eq!(tile(3, 0, 1), gt_colors.get_pixel(0, 1).0);
         assert_eq!(tile(2, 5, 3), [0, 0, 0], "invalid ToF is black");

@@ -260,13 +260,13 @@ pub fn generate_sequence(
     for i in 0..params.frames {
         let scene = motion.at(i as f64 / params.fps);
         let sample = simulate(&scene, &params.sim, params.seed, i as u64);
-        let aligned = sample.into_frame(i as u64, i as u64 * interval_ns);
-        let mut frame = apply(&aligned, drift.at(i))?;
+        let aligned = sample.into_capture_sample(i as u64, i as u64 * interval_ns);
+        let mut drifted = apply(&aligned, drift.at(i))?;
         if !params.write_flow {
-            frame.flow = None;
+            drifted.truth.flow = None;
         }
         writer
-            .write_frame(&frame)
+            .write_sample(&drifted.frame, &drifted.truth)
             .with_context(|| format!("writing frame {i}"))?;
         progress(i + 1);
     }

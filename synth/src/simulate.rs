@@ -1,7 +1,7 @@
 //! One simulated sample: render the scene, run the sensor, tone-map the RGB image, and package
 //! everything as a `dear_pipeline` [`RgbdFrame`] on the ToF grid (an *aligned* sample).
 
-use dear_capture::{Calibration, RgbdFrame};
+use dear_capture::{Calibration, GroundTruth, RgbdFrame};
 use ndarray::{Array2, Array3};
 use serde::{Deserialize, Serialize};
 
@@ -82,20 +82,24 @@ pub fn simulate(scene: &Scene, cfg: &SimConfig, seed: u64, frame: u64) -> Sample
 }
 
 impl Sample {
-    /// The sample as a frame of the capture format. It is aligned by construction, so its
-    /// perturbation is recorded as exactly zero (training treats a frame without a known
-    /// perturbation as unusable) and it has no flow file.
-    pub fn into_frame(self, index: u64, timestamp_ns: u64) -> RgbdFrame {
-        RgbdFrame {
-            index,
-            timestamp_ns,
-            rgb: self.rgb,
-            amplitude: self.tof.amplitude,
-            depth: self.tof.depth,
-            gt_depth: Some(self.gt_depth),
-            mask: Some(self.mask),
-            flow: None,
-            perturbation: Some(Calibration::default()),
+    /// The sample as a frame of the capture format with its ground truth. It is aligned by
+    /// construction, so its perturbation is recorded as exactly zero (training treats a frame
+    /// without a known perturbation as unusable) and it has no flow file.
+    pub fn into_capture_sample(self, index: u64, timestamp_ns: u64) -> dear_capture::Sample {
+        dear_capture::Sample {
+            frame: RgbdFrame::new(
+                index,
+                timestamp_ns,
+                self.rgb,
+                self.tof.amplitude,
+                self.tof.depth,
+            ),
+            truth: GroundTruth {
+                depth: Some(self.gt_depth),
+                mask: Some(self.mask),
+                flow: None,
+                perturbation: Some(Calibration::default()),
+            },
         }
     }
 }

@@ -39,9 +39,9 @@ fn generate_then_perturb_round_trips_with_exact_flow() {
     assert_eq!(dir.manifest().modulation_frequencies_hz, vec![20e6]);
     assert!(dir.manifest().source["amplitude_gain_e_per_dn"].as_f64() == Some(4.0));
     for i in 0..3 {
-        let f = dir.read_frame(i).unwrap();
-        let gt = f.gt_depth.as_ref().unwrap();
-        let mask = f.mask.as_ref().unwrap();
+        let dear_capture::Sample { frame: f, truth } = dir.read_sample(i).unwrap();
+        let gt = truth.depth.as_ref().unwrap();
+        let mask = truth.mask.as_ref().unwrap();
         // Aligned: the ToF depth agrees with the ground truth on most valid pixels (noise
         // and flying pixels aside), and the amplitude uses the 16-bit range.
         let mut errs: Vec<f32> = gt
@@ -62,7 +62,7 @@ fn generate_then_perturb_round_trips_with_exact_flow() {
             amax > 500.0,
             "amplitude barely uses the 16-bit range: {amax}"
         );
-        assert!(f.perturbation == Some(Calibration::default()) && f.flow.is_none());
+        assert!(truth.perturbation == Some(Calibration::default()) && truth.flow.is_none());
     }
 
     let misaligned = tmp.path().join("sigma2");
@@ -76,16 +76,17 @@ fn generate_then_perturb_round_trips_with_exact_flow() {
     .unwrap();
     let mdir = CaptureDir::open(&misaligned).unwrap();
     for i in 0..3 {
-        let (a, m) = (dir.read_frame(i).unwrap(), mdir.read_frame(i).unwrap());
-        let p = m.perturbation.expect("perturbation recorded");
+        let a = dir.read_frame(i).unwrap();
+        let dear_capture::Sample { frame: m, truth } = mdir.read_sample(i).unwrap();
+        let p = truth.perturbation.expect("perturbation recorded");
         assert_eq!(mdir.manifest().frames[i].perturbation, Some(p));
         // ToF images unchanged; RGB moved.
         assert_eq!(a.depth, m.depth);
         assert_eq!(a.amplitude, m.amplitude);
         assert_ne!(a.rgb, m.rgb);
-        let flow = m.flow.as_ref().unwrap();
-        let gt = m.gt_depth.as_ref().unwrap();
-        let mask = m.mask.as_ref().unwrap();
+        let flow = truth.flow.as_ref().unwrap();
+        let gt = truth.depth.as_ref().unwrap();
+        let mask = truth.mask.as_ref().unwrap();
         let mut n = 0;
         for (q, &valid) in mask.indexed_iter() {
             if valid {
@@ -131,8 +132,8 @@ fn sequence_records_a_smooth_drift() {
         .windows(2)
         .all(|w| w[0] != w[1] && (w[0].cx - w[1].cx).abs() < 0.5));
     // Frames differ (motion) but are all valid captures with flow.
-    let (a, b) = (dir.read_frame(0).unwrap(), dir.read_frame(3).unwrap());
-    assert_ne!(a.depth, b.depth);
-    assert!(b.flow.is_some() && b.gt_depth.is_some());
+    let (a, b) = (dir.read_sample(0).unwrap(), dir.read_sample(3).unwrap());
+    assert_ne!(a.frame.depth, b.frame.depth);
+    assert!(b.truth.flow.is_some() && b.truth.depth.is_some());
     assert!(m.frames[3].timestamp_ns > m.frames[0].timestamp_ns);
 }

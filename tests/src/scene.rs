@@ -79,5 +79,5 @@ pub fn frame(i: u64, w: usize, h: usize) -> RgbdFrame {
             0.0
         }
     });
-    RgbdFrame::sensor(i, i * 33_333_333, rgb, amplitude, depth)
+    RgbdFrame::new(i, i * 33_333_333, rgb, amplitude, depth)
 }

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use dear_capture::{Calibration, CaptureManifest, CaptureWriter, Intrinsics};
+use dear_capture::{Calibration, CaptureManifest, CaptureWriter, GroundTruth, Intrinsics};
 use dear_e2e_tests::processes::binary;
 use dear_e2e_tests::scene;
 use ndarray::Array2;
@@ -29,14 +29,15 @@ fn write_capture(dir: &Path, frames: u64, ground_truth: bool) -> Vec<Array2<f32>
     let mut writer = CaptureWriter::create(dir, manifest).expect("create capture");
     let mut truths = Vec::new();
     for i in 0..frames {
-        let mut frame = scene::frame(i, W, H);
+        let frame = scene::frame(i, W, H);
+        let mut known = GroundTruth::default();
         if ground_truth {
             let truth = Array2::from_shape_fn((H, W), |(r, c)| scene::true_depth(i, W, H, r, c));
-            frame.gt_depth = Some(truth.clone());
-            frame.perturbation = Some(Calibration::default());
+            known.depth = Some(truth.clone());
+            known.perturbation = Some(Calibration::default());
             truths.push(truth);
         }
-        writer.write_frame(&frame).expect("write frame");
+        writer.write_sample(&frame, &known).expect("write frame");
     }
     writer.finish().expect("finish capture");
     truths

@@ -38,11 +38,7 @@ pub fn error_map(result: ArrayView2<f32>, gt: ArrayView2<f32>) -> Array2<f32> {
 
 /// RGB | amplitude | ToF depth | result | ground truth | error, depths on one colour scale
 /// (the ground truth's display range), the error on `0 … ERROR_MAP_MAX_M`.
-pub fn panel(frame: &RgbdFrame, result: ArrayView2<f32>) -> RgbImage {
-    let gt = frame
-        .gt_depth
-        .as_ref()
-        .expect("evaluated frames have ground truth");
+pub fn panel(frame: &RgbdFrame, gt: ArrayView2<f32>, result: ArrayView2<f32>) -> RgbImage {
     let range = Some(display_range(gt.view(), None));
     hstack(&[
         rgb_image(frame.rgb.view()),
@@ -85,11 +81,12 @@ pub fn scanline_row(gt: ArrayView2<f32>) -> usize {
 
 /// Depth along `row`: ToF input (grey), ground truth (green) and result (red, on top), on
 /// white with a light grid every 0.5 m. Two plot pixels per image column.
-pub fn scanline_plot(frame: &RgbdFrame, result: ArrayView2<f32>, row: usize) -> RgbImage {
-    let gt = frame
-        .gt_depth
-        .as_ref()
-        .expect("evaluated frames have ground truth");
+pub fn scanline_plot(
+    frame: &RgbdFrame,
+    gt: ArrayView2<f32>,
+    result: ArrayView2<f32>,
+    row: usize,
+) -> RgbImage {
     let curves = [
         (frame.depth.row(row), SCANLINE_TOF),
         (gt.row(row), SCANLINE_GT),
@@ -111,8 +108,8 @@ mod tests {
     use dear_picture::panel::GAP;
     use ndarray::Array3;
 
-    /// 4×5 frame: ground truth 2 m except row 2, a 1 … 3 m ramp; the ToF 5 cm too far.
-    fn frame() -> RgbdFrame {
+    /// 4×5 frame and its ground truth: 2 m except row 2, a 1 … 3 m ramp; the ToF 5 cm too far.
+    fn frame() -> (RgbdFrame, Array2<f32>) {
         let gt = Array2::from_shape_fn(
             (4, 5),
             |(r, c)| {
@@ -123,23 +120,21 @@ mod tests {
                 }
             },
         );
-        let mut frame = RgbdFrame::sensor(
+        let frame = RgbdFrame::new(
             7,
             0,
             Array3::from_elem((4, 5, 3), 60u8),
             Array2::from_elem((4, 5), 1.0),
             gt.mapv(|z| z + 0.05),
         );
-        frame.gt_depth = Some(gt);
-        frame
+        (frame, gt)
     }
 
     #[test]
     fn panel_is_six_tiles_with_legends_on_ground_truth_and_error() {
-        let frame = frame();
-        let gt = frame.gt_depth.as_ref().unwrap();
+        let (frame, gt) = frame();
         let result = gt.view();
-        let img = panel(&frame, result);
+        let img = panel(&frame, gt.view(), result);
         let range = Some(display_range(gt.view(), None));
         let gt_tile = colorize_depth(gt.view(), range);
         let error_tile = colorize_depth(
@@ -161,11 +156,10 @@ mod tests {
 
     #[test]
     fn scanline_follows_the_row_with_most_structure() {
-        let frame = frame();
-        let gt = frame.gt_depth.as_ref().unwrap();
+        let (frame, gt) = frame();
         let row = scanline_row(gt.view());
         assert_eq!(row, 2);
-        let img = scanline_plot(&frame, gt.view(), row);
+        let img = scanline_plot(&frame, gt.view(), gt.view(), row);
         assert_eq!(img.dimensions(), (2 * 5, SCANLINE_HEIGHT));
         // The result is drawn last: its samples are in its colour at columns 0, 2, … 8.
         for c in 0..5u32 {

@@ -18,7 +18,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
-use dear_capture::{CaptureDir, RgbdFrame};
+use dear_capture::{CaptureDir, Sample};
 use dear_pipeline::evaluate::{
     ground_truth_flow, ground_truth_mask, BundleMethod, Evaluation, Method, MethodOutput,
     MethodReport, MethodRunner,
@@ -159,18 +159,19 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     for &pos in &positions {
         bar.inc(1);
         let id = capture.manifest().frames[pos].id;
-        let frame = match capture.read_frame(pos) {
-            Ok(f) => f,
+        let sample = match capture.read_sample(pos) {
+            Ok(s) => s,
             Err(e) => {
                 bar.suspend(|| eprintln!("dear eval: skipping frame {id}: {e}"));
                 skipped.push(format!("frame {id}: {e}"));
                 continue;
             }
         };
-        let valid = ground_truth_mask(&frame)?;
-        let truth = ground_truth_flow(&frame);
+        let frame = &sample.frame;
+        let valid = ground_truth_mask(&sample)?;
+        let truth = ground_truth_flow(&sample);
         let mut add = |name: &str, out: &MethodOutput, network: Option<bool>| {
-            eval.add(name, &frame, out, valid.view(), truth.as_ref());
+            eval.add(name, &sample, out, valid.view(), truth.as_ref());
             if let (true, Some(flow), Some(truth)) = (args.online, &out.flow, &truth) {
                 let error = aepe(flow, truth, valid.view()).unwrap_or(f64::NAN);
                 let network = network.map_or(String::new(), |n| u8::from(n).to_string());
@@ -181,7 +182,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         let mut shown: Option<(String, ndarray::Array2<f32>)> = None;
         let mut bundle_shown = false;
         for &method in &classical {
-            if let Some(out) = runner.run(method, &frame) {
+            if let Some(out) = runner.run(method, &sample) {
                 add(method.name(), &out, None);
                 if method == Method::StaticClassical || shown.is_none() {
                     shown = Some((method.name().to_string(), out.depth));
@@ -190,7 +191,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         }
         for (b, (calibrator, network_frames)) in bundles.iter_mut().zip(&mut online) {
             let name = b.name().to_string();
-            match b.run(&frame) {
+            match b.run(frame) {
                 Ok(o) => {
                     add(&format!("{name} aligned"), &o.aligned, None);
                     add(&name, &o.refined, Some(true));
@@ -205,14 +206,14 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
                     continue;
                 }
             }
-            if let Some(result) = b.run_refine_only(&frame) {
+            if let Some(result) = b.run_refine_only(&sample) {
                 match result {
                     Ok(out) => add(&format!("{name} refine @ true calibration"), &out, None),
                     Err(e) => skipped.push(format!("frame {id}: bundle {name} refine-only: {e}")),
                 }
             }
             if args.online {
-                match b.run_online(&frame, calibrator) {
+                match b.run_online(frame, calibrator) {
                     Ok((out, report)) => {
                         *network_frames += usize::from(report.ran_flow_network);
                         add(
@@ -227,7 +228,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         }
         if figure_positions.contains(&pos) {
             if let Some((method, depth)) = &shown {
-                figure_files.extend(write_figures(&figures_dir, &frame, depth.view())?);
+                figure_files.extend(write_figures(&figures_dir, &sample, depth.view())?);
                 figures_method = Some(method.clone());
             }
         }
@@ -279,18 +280,22 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
 /// directory.
 fn write_figures(
     dir: &Path,
-    frame: &RgbdFrame,
+    sample: &Sample,
     result: ndarray::ArrayView2<f32>,
 ) -> anyhow::Result<Vec<String>> {
+    let frame = &sample.frame;
     let stem = format!("{:06}", frame.index);
-    let gt = frame.gt_depth.as_ref().expect("checked above");
-    let row = figures::scanline_row(gt.view());
+    let gt = sample.truth.depth.as_ref().expect("checked above").view();
+    let row = figures::scanline_row(gt);
     let files = [
-        (format!("{stem}.panel.png"), figures::panel(frame, result)),
+        (
+            format!("{stem}.panel.png"),
+            figures::panel(frame, gt, result),
+        ),
         (format!("{stem}.blend.png"), figures::blends(frame, result)?),
         (
             format!("{stem}.scanline-row{row}.png"),
-            figures::scanline_plot(frame, result, row),
+            figures::scanline_plot(frame, gt, result, row),
         ),
     ];
     let mut names = Vec::new();

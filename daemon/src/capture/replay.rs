@@ -126,7 +126,7 @@ impl FrameSource for ReplaySource {
         self.position += 1;
         let arrived = std::time::Instant::now();
         // Sensor planes only: the replay is a camera, its ground truth is not published.
-        match self.dir.read_sensor_frame(position) {
+        match self.dir.read_frame(position) {
             Ok(frame) => {
                 self.good_in_pass += 1;
                 SourceItem::Frame {

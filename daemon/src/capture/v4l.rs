@@ -330,7 +330,7 @@ impl V4lSource {
         quantize_as_stored(depth.view_mut(), amplitude.view_mut(), STORED_DEPTH_SCALE);
         let index = self.next_index;
         self.next_index += 1;
-        RgbdFrame::sensor(index, ts_us * 1000, rgb, amplitude, depth)
+        RgbdFrame::new(index, ts_us * 1000, rgb, amplitude, depth)
     }
 
     /// A pair as a frame, registered; `decode_us` is the registration's time (the decoding

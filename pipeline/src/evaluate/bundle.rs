@@ -11,6 +11,7 @@
 use ndarray::Array2;
 
 use super::methods::MethodOutput;
+use crate::capture::Sample;
 use crate::dear::{ChainError, ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
 use crate::model::{BundleError, ModelBundle};
 use crate::online::OnlineCalibrator;
@@ -110,21 +111,21 @@ impl BundleMethod {
     ///
     /// # Errors
     /// As [`DearChain::process`].
-    pub fn run_refine_only(
-        &mut self,
-        frame: &RgbdFrame,
-    ) -> Option<Result<MethodOutput, ChainError>> {
-        let truth = frame.perturbation?;
-        Some(self.process(frame, ChainMode::Cached(truth)).map(|report| {
-            let t = report.timings;
-            MethodOutput {
-                depth: self.depth.clone(),
-                flow: None,
-                flow_rough: None,
-                calibration: Some(truth),
-                seconds: t.total().as_secs_f64(),
-            }
-        }))
+    pub fn run_refine_only(&mut self, sample: &Sample) -> Option<Result<MethodOutput, ChainError>> {
+        let truth = sample.truth.perturbation?;
+        Some(
+            self.process(&sample.frame, ChainMode::Cached(truth))
+                .map(|report| {
+                    let t = report.timings;
+                    MethodOutput {
+                        depth: self.depth.clone(),
+                        flow: None,
+                        flow_rough: None,
+                        calibration: Some(truth),
+                        seconds: t.total().as_secs_f64(),
+                    }
+                }),
+        )
     }
 
     /// The daemon's online mode on the next frame of a sequence: `online` decides whether the

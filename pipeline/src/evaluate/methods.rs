@@ -6,10 +6,11 @@ use ndarray::Array2;
 
 use super::edge_matching::{estimate_calibration_or, EdgeMatchParams};
 use crate::align::StaticAligner;
+use crate::capture::Sample;
 use crate::direct::{estimate_calibration_direct, DirectFitParams};
 use crate::filter::ClassicalRefiner;
 use crate::frame::Flow;
-use crate::{Calibration, RgbdFrame};
+use crate::Calibration;
 
 /// One row of the comparison.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -100,7 +101,8 @@ impl MethodRunner {
 
     /// Runs `method` on `frame`. `None` when the method cannot apply (the oracle without a
     /// known perturbation).
-    pub fn run(&mut self, method: Method, frame: &RgbdFrame) -> Option<MethodOutput> {
+    pub fn run(&mut self, method: Method, sample: &Sample) -> Option<MethodOutput> {
+        let frame = &sample.frame;
         let start = Instant::now();
         let (calibration, refine) = match method {
             Method::RawTof => {
@@ -134,7 +136,7 @@ impl MethodRunner {
                 );
                 (fit.calibration, method == Method::DirectFitClassical)
             }
-            Method::OracleCalibration => (frame.perturbation?, false),
+            Method::OracleCalibration => (sample.truth.perturbation?, false),
         };
         let mut aligned = Array2::zeros(frame.dim());
         self.aligner

@@ -17,7 +17,8 @@ pub use report::{Evaluation, MethodReport};
 use ndarray::{Array2, Zip};
 
 use crate::capture::flo::UNKNOWN_FLOW;
-use crate::{Flow, RgbdFrame};
+use crate::capture::Sample;
+use crate::Flow;
 
 /// Why a frame cannot be evaluated.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -30,16 +31,16 @@ pub enum EvalError {
 
 /// Pixels where the ground truth is usable: valid gt depth, the mask (when present), and a
 /// known ground-truth flow (when present).
-pub fn ground_truth_mask(frame: &RgbdFrame) -> Result<Array2<bool>, EvalError> {
-    let gt = frame
-        .gt_depth
-        .as_ref()
-        .ok_or(EvalError::NoGroundTruth { frame: frame.index })?;
+pub fn ground_truth_mask(sample: &Sample) -> Result<Array2<bool>, EvalError> {
+    let truth = &sample.truth;
+    let gt = truth.depth.as_ref().ok_or(EvalError::NoGroundTruth {
+        frame: sample.frame.index,
+    })?;
     let mut valid = gt.mapv(crate::geometry::is_valid_depth);
-    if let Some(mask) = &frame.mask {
+    if let Some(mask) = &truth.mask {
         Zip::from(&mut valid).and(mask).for_each(|v, &m| *v &= m);
     }
-    if let Some(flow) = &frame.flow {
+    if let Some(flow) = &truth.flow {
         Zip::from(&mut valid)
             .and(&flow.u)
             .and(&flow.v)
@@ -56,11 +57,12 @@ pub fn ground_truth_mask(frame: &RgbdFrame) -> Result<Array2<bool>, EvalError> {
 /// The ground-truth RGB→ToF flow of a frame: its `.flo` file, else the flow its recorded
 /// perturbation predicts at the ground-truth depth (aligned captures record a zero
 /// perturbation and no flow file). `None` when neither is known.
-pub fn ground_truth_flow(frame: &RgbdFrame) -> Option<Flow> {
-    if let Some(flow) = &frame.flow {
+pub fn ground_truth_flow(sample: &Sample) -> Option<Flow> {
+    let truth = &sample.truth;
+    if let Some(flow) = &truth.flow {
         return Some(flow.clone());
     }
-    let (p, gt) = (frame.perturbation?, frame.gt_depth.as_ref()?);
+    let (p, gt) = (truth.perturbation?, truth.depth.as_ref()?);
     let mut flow = Flow::zeros(gt.nrows(), gt.ncols());
     Zip::from(&mut flow.u)
         .and(&mut flow.v)

@@ -3,8 +3,9 @@
 use serde::Serialize;
 
 use super::methods::MethodOutput;
+use crate::capture::Sample;
 use crate::metrics::{aepe, DepthErrorSplit, CLASSES, MAX_EVAL_DEPTH_M};
-use crate::{Flow, RgbdFrame};
+use crate::Flow;
 use ndarray::ArrayView2;
 
 /// Accumulated results of one method.
@@ -54,7 +55,7 @@ impl Evaluation {
     pub fn add(
         &mut self,
         name: &str,
-        frame: &RgbdFrame,
+        sample: &Sample,
         output: &MethodOutput,
         valid: ArrayView2<bool>,
         truth: Option<&Flow>,
@@ -67,8 +68,10 @@ impl Evaluation {
                 &mut self.methods.last_mut().expect("just pushed").1
             }
         };
-        let gt = frame
-            .gt_depth
+        let frame = &sample.frame;
+        let gt = sample
+            .truth
+            .depth
             .as_ref()
             .expect("caller checked ground truth");
         let gt_masked = ndarray::Zip::from(gt)

@@ -143,7 +143,7 @@ fn run(bundle_dir: &Path, capture_dir: &Path, count: usize, out: &Path) -> Resul
     }
     let started = Instant::now();
     for position in (0..count).map(|i| i * capture.len() / count) {
-        let frame = capture.read_sensor_frame(position).map_err(|e| {
+        let frame = capture.read_frame(position).map_err(|e| {
             format!(
                 "cannot read frame {position} of {}: {e}",
                 capture_dir.display()

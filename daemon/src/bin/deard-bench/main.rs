@@ -148,7 +148,7 @@ fn run(cli: &Cli) -> Result<(), String> {
     // Keep the frames in memory: the figures are processing, not PNG decoding.
     let mut frames = Vec::new();
     for position in 0..capture.len() {
-        match capture.read_sensor_frame(position) {
+        match capture.read_frame(position) {
             Ok(f) => frames.push(f),
             Err(e) => eprintln!("deard-bench: skipping frame {position}: {e}"),
         }
