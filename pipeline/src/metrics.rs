@@ -15,6 +15,7 @@
 use ndarray::{ArrayView2, Zip};
 
 use crate::frame::Flow;
+use crate::geometry::is_valid_depth;
 
 /// The paper's evaluation range: MAE is computed where the ground truth is within 4 m.
 pub const MAX_EVAL_DEPTH_M: f32 = 4.0;
@@ -75,12 +76,8 @@ impl DepthErrorSplit {
     ) {
         let mut pixels: Vec<(f32, f32)> = Vec::new(); // (input error, output value - gt)
         Zip::from(input).and(output).and(gt).for_each(|&i, &o, &g| {
-            if g > 0.0 && g <= max_depth && i > 0.0 && i.is_finite() {
-                let out_err = if crate::geometry::is_valid_depth(o) {
-                    o - g
-                } else {
-                    f32::NAN
-                };
+            if is_valid_depth(g) && g <= max_depth && is_valid_depth(i) {
+                let out_err = if is_valid_depth(o) { o - g } else { f32::NAN };
                 pixels.push(((i - g).abs(), out_err));
             }
         });

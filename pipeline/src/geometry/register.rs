@@ -20,6 +20,7 @@ use ndarray::{ArrayView2, ArrayViewMut2, Axis};
 use rayon::prelude::*;
 
 use crate::capture::Intrinsics;
+use crate::geometry::is_valid_depth;
 
 /// Rotation (row-major, ToF → RGB) and the two cameras' intrinsics.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -109,7 +110,7 @@ pub fn register_tof(
                 }
                 let (nx, ny) = (px.round() as usize, py.round() as usize);
                 let z = depth[(ny, nx)];
-                *d = if z > 0.0 && z.is_finite() {
+                *d = if is_valid_depth(z) {
                     let rx = (nx as f32 - t.cx) / t.fx;
                     let ry = (ny as f32 - t.cy) / t.fy;
                     z * (b[0] * rx + b[1] * ry + b[2])
