@@ -1,7 +1,7 @@
 //! Errors of the capture-directory codecs. Every variant names the file it is about, so a user
 //! (or the daemon's log) can go straight to the broken frame.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// What went wrong reading or writing a capture directory.
 #[derive(Debug, thiserror::Error)]
@@ -47,6 +47,17 @@ impl CaptureError {
             | CaptureError::Resolution { path, .. }
             | CaptureError::Manifest { path, .. }
             | CaptureError::Encode { path, .. } => path,
+        }
+    }
+
+    /// `path` holds an image of `found` (width, height) where the capture is `expected`.
+    pub(crate) fn resolution(path: &Path, expected: (u32, u32), found: (u32, u32)) -> Self {
+        CaptureError::Resolution {
+            path: path.to_owned(),
+            width: expected.0,
+            height: expected.1,
+            found_w: found.0,
+            found_h: found.1,
         }
     }
 

@@ -63,16 +63,8 @@ pub fn read_flo(path: &Path, size: Option<(u32, u32)>) -> Result<Flow, CaptureEr
             format!("{w}x{h}"),
         ));
     };
-    if let Some((width, height)) = size {
-        if (w, h) != (width, height) {
-            return Err(CaptureError::Resolution {
-                path: path.to_owned(),
-                width,
-                height,
-                found_w: w,
-                found_h: h,
-            });
-        }
+    if let Some(expected) = size.filter(|&expected| expected != (w, h)) {
+        return Err(CaptureError::resolution(path, expected, (w, h)));
     }
     // Checked although the sides are bounded: every size read from a file is.
     let expected_len = u64::from(w)

@@ -87,14 +87,8 @@ fn decode(
     let mut file = File::open(path).map_err(|e| CaptureError::io(path, e))?;
     let (w, h) = declared_size(path, &mut file)?;
     match size {
-        Some((width, height)) if (w, h) != (width, height) => {
-            return Err(CaptureError::Resolution {
-                path: path.to_owned(),
-                width,
-                height,
-                found_w: w,
-                found_h: h,
-            });
+        Some(expected) if (w, h) != expected => {
+            return Err(CaptureError::resolution(path, expected, (w, h)));
         }
         None if w > MAX_SIDE || h > MAX_SIDE => {
             return Err(CaptureError::Format {

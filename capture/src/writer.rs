@@ -69,14 +69,13 @@ impl CaptureWriter {
     ) -> Result<(), CaptureError> {
         let paths = FramePaths::new(&self.root, frame.index);
         let (h, w) = frame.dim();
-        if (w as u32, h as u32) != (self.manifest.width, self.manifest.height) {
-            return Err(CaptureError::Resolution {
-                path: paths.depth,
-                width: self.manifest.width,
-                height: self.manifest.height,
-                found_w: w as u32,
-                found_h: h as u32,
-            });
+        let expected = (self.manifest.width, self.manifest.height);
+        if (w as u32, h as u32) != expected {
+            return Err(CaptureError::resolution(
+                &paths.depth,
+                expected,
+                (w as u32, h as u32),
+            ));
         }
         if let Some(last) = self.manifest.frames.last() {
             if frame.index <= last.id || frame.timestamp_ns < last.timestamp_ns {
