@@ -35,8 +35,8 @@ cd "$(dirname "$0")/.."
 unit=daemon/systemd/deard.service
 max_exposure=2.0
 
-fail() { echo "install_test: FAIL: $*" >&2; exit 1; }
-step() { echo "== $*"; }
+SCRIPT_NAME=install_test
+. scripts/lib.sh
 
 [ "$(id -u)" = 0 ] || fail "must run as root (it installs into /usr/local and /etc, adds a user)"
 for tool in systemd-analyze strace setpriv unshare python3 useradd userdel cc; do

@@ -32,10 +32,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-fail() { echo "test-aarch64: FAIL: $*" >&2; exit 1; }
-step() { echo "== $*"; }
-now() { date +%s.%N; }
-since() { python3 -c "import sys; print(f'{float(sys.argv[2]) - float(sys.argv[1]):.1f} s')" "$1" "$(now)"; }
+SCRIPT_NAME=test-aarch64
+. scripts/lib.sh
 
 triple=aarch64-unknown-linux-gnu
 sysroot=/usr/aarch64-linux-gnu
@@ -67,7 +65,7 @@ t=$(now)
 a64_cargo build --quiet -p deard -p dear-cli -p dear-e2e-tests -p dear-pipeline \
     --bin deard --bin dear --bin chain_depth --example write_geometry_fixtures
 if $build_only; then
-    echo "cross-build: $(since "$t")"
+    echo "cross-build: $(since "$t") s"
     exit 0
 fi
 # The library's test executable (the same packages' libraries, for the same features).
@@ -85,7 +83,7 @@ for line in open(sys.argv[1]):
         print(m["executable"])
 ' "$a64_target_dir/test-build.json")
 [ -x "$unit_tests" ] || fail "no dear-pipeline unit test executable in $a64_target_dir/test-build.json"
-echo "cross-build: $(since "$t")"
+echo "cross-build: $(since "$t") s"
 for bin in deard dear chain_depth; do
     machine=$(od -An -tu2 -j18 -N2 "$a64/$bin" | tr -d ' ')
     [ "$machine" = 183 ] || fail "$a64/$bin is not an aarch64 executable (ELF machine $machine)"
@@ -106,7 +104,7 @@ for module in geometry filter; do
     [ "$n" -gt 0 ] || fail "no $module:: test passed under qemu (log: $log)"
     echo "$module: $n tests passed"
 done
-echo "unit tests under qemu: $(since "$t")"
+echo "unit tests under qemu: $(since "$t") s"
 
 # --- 3. the bundle through tract: aarch64 against x86 ---------------------------------------
 scratch=$(mktemp -d /tmp/dear-aarch64.XXXXXX)
@@ -128,11 +126,11 @@ native=target/release/chain_depth
 chain_args=(run --bundle models/edge --capture samples/demo --frames "$frames")
 t=$(now)
 "$native" "${chain_args[@]}" --out "$scratch/x86_64.depth" | sed 's/^/x86-64: /'
-echo "x86-64 native: $(since "$t")"
+echo "x86-64 native: $(since "$t") s"
 t=$(now)
 "${qemu[@]}" "$a64/chain_depth" "${chain_args[@]}" --out "$scratch/aarch64.depth" \
     | sed 's/^/aarch64 (qemu): /'
-echo "aarch64 under qemu: $(since "$t")"
+echo "aarch64 under qemu: $(since "$t") s"
 "$native" compare "$scratch/x86_64.depth" "$scratch/aarch64.depth" --tolerance-mm 1 \
     || fail "the aarch64 depth differs from the x86-64 depth by more than 1 mm (above)"
 
@@ -151,7 +149,7 @@ for _ in $(seq 1200); do
 done
 grep -q serving "$scratch/deard.log" \
     || fail "the aarch64 deard did not say 'serving' in 120 s: $(cat "$scratch/deard.log")"
-echo "deard serving after $(since "$t")"
+echo "deard serving after $(since "$t") s"
 listing=$("${qemu[@]}" "$a64/dear" list 2>&1) || fail "the aarch64 dear list failed: $listing"
 grep -q "^ *$service " <<<"$listing" || fail "the aarch64 dear list does not show $service: $listing"
 t=$(now)

@@ -23,8 +23,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-fail() { echo "test-deb: FAIL: $*" >&2; exit 1; }
-step() { echo "== $*"; }
+SCRIPT_NAME=test-deb
+. scripts/lib.sh
 
 [ "$(id -u)" = 0 ] || fail "must run as root (it installs the package and adds users)"
 for tool in dpkg dpkg-deb setpriv systemd-analyze useradd userdel groupdel; do

@@ -93,8 +93,8 @@ vm_dir=$here/v4l2-vm
 
 die() { echo "test-v4l2-vm: $*" >&2; exit 1; }
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
-now() { date +%s.%N; }
-since() { awk -v a="$1" -v b="$(now)" 'BEGIN { printf "%.1f", b - a }'; }
+SCRIPT_NAME=test-v4l2-vm
+. "$here/lib.sh"
 
 bins=() files=() run_script="" vivid_params="" vm_timeout=600 self_test=false prepare_only=false
 deard=false
