@@ -5,6 +5,8 @@ use std::process::Command;
 
 use deard::config::Config;
 
+mod support;
+
 /// The validation error for `toml`, panicking if it is accepted.
 fn rejected(toml: &str) -> String {
     match Config::from_toml(toml) {
@@ -20,22 +22,8 @@ fn accepted(toml: &str) -> Config {
 /// Runs `deard` on `samples/demo` with the configuration `toml` on a service of its own
 /// (`test` names it), expecting it to fail at start-up; returns its stderr.
 fn start_failure(toml: &str, test: &str) -> String {
-    let tmp = tempfile::tempdir().unwrap();
-    let file = tmp.path().join("deard.toml");
-    std::fs::write(&file, toml).unwrap();
     let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
-    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
-        .args(["--config", file.to_str().unwrap(), "--replay", demo])
-        .args([
-            "--service",
-            &format!("dear-test/{}/{test}/frames", std::process::id()),
-            "--exit-when-done",
-        ])
-        .output()
-        .expect("run deard");
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "deard started with {toml:?}: {err}");
-    err
+    support::start_failure(toml, &["--replay", demo, "--exit-when-done"], test)
 }
 
 #[test]

@@ -3,9 +3,9 @@
 //! the node (the live capture itself is tested against the kernel's vivid driver in a VM:
 //! `scripts/test-v4l2-vm.sh --deard`).
 
-use std::process::Command;
-
 use deard::config::Config;
+
+mod support;
 
 const EXAMPLE: &str = include_str!("../deard.example.toml");
 
@@ -115,20 +115,7 @@ fn values_that_cannot_work_are_refused_by_key() {
 
 /// Runs deard with `toml`, expecting a start-up failure; returns stderr.
 fn start_failure(toml: &str) -> String {
-    let tmp = tempfile::tempdir().unwrap();
-    let file = tmp.path().join("deard.toml");
-    std::fs::write(&file, toml).unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
-        .args(["--config", file.to_str().unwrap()])
-        .args([
-            "--service",
-            &format!("dear-test/{}/v4l/frames", std::process::id()),
-        ])
-        .output()
-        .expect("run deard");
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!out.status.success(), "deard started with {toml:?}: {err}");
-    err
+    support::start_failure(toml, &[], "v4l")
 }
 
 #[test]
