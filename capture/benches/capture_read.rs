@@ -1,12 +1,12 @@
 //! Reading one replayed frame of `samples/demo` (320 × 240): the full read (sensor planes,
 //! ground truth, mask; what evaluation uses) against the sensor read the daemon's replay uses.
 //!
-//! `cargo bench -p dear-pipeline --bench capture_read -- --warm-up-time 1 --measurement-time 5`
+//! `cargo bench -p dear-capture --bench capture_read -- --warm-up-time 1 --measurement-time 5`
 
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use dear_pipeline::capture::CaptureDir;
+use dear_capture::CaptureDir;
 
 fn bench(c: &mut Criterion) {
     let demo = CaptureDir::open(concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo"))

@@ -3,10 +3,10 @@
 
 use std::fs;
 
-use dear_pipeline::capture::{
+use dear_capture::{
     png, CaptureDir, CaptureError, CaptureManifest, CaptureWriter, GroundTruth, Intrinsics, Sample,
 };
-use dear_pipeline::{Calibration, Flow, RgbdFrame};
+use dear_capture::{Calibration, Flow, RgbdFrame};
 use ndarray::{Array2, Array3};
 
 const W: usize = 8;
