@@ -90,10 +90,7 @@ cleanup() {
     rm -rf "${installed[@]}" /run/deard
     # The users and the group (anything of theirs in /dev/shm too, should a check fail).
     find /dev/shm -maxdepth 1 \( -user deard -o -user "$app_user" \) -delete 2>/dev/null || true
-    for u in "$app_user" "$other_user" deard; do
-        getent passwd "$u" >/dev/null && userdel "$u"
-    done
-    getent group dear >/dev/null && groupdel dear
+    remove_accounts dear "$app_user" "$other_user" deard
     if [ "$rc" = 0 ]; then
         rm -rf "$scratch"
         echo "install_test: ok"
@@ -200,12 +197,7 @@ sandboxed_run=(
 step "starting the unit's ExecStart in the emulated sandbox (WatchdogSec=$watchdog_s)"
 strace -f -qq -o "$scratch/trace" "${sandboxed_run[@]}" >"$scratch/deard.log" 2>&1 &
 daemon_pid=$!
-for _ in $(seq 300); do
-    grep -q serving "$scratch/deard.log" && break
-    kill -0 "$daemon_pid" 2>/dev/null || fail "deard exited: $(cat "$scratch/deard.log")"
-    sleep 0.1
-done
-grep -q serving "$scratch/deard.log" || fail "deard did not say 'serving' in 30 s: $(cat "$scratch/deard.log")"
+wait_for_serving "$daemon_pid" "$scratch/deard.log" 30 deard
 grep -q "root=/run/deard/iceoryx2" "$scratch/deard.log" \
     || fail "deard does not use /run/deard/iceoryx2: $(cat "$scratch/deard.log")"
 

@@ -142,13 +142,7 @@ t=$(now)
 "${qemu[@]}" "$a64/deard" --replay samples/demo --service "$service" --loop --stats-interval 5 \
     >"$scratch/deard.log" 2>&1 &
 daemon_pid=$!
-for _ in $(seq 1200); do
-    grep -q serving "$scratch/deard.log" && break
-    kill -0 "$daemon_pid" 2>/dev/null || fail "the aarch64 deard exited: $(cat "$scratch/deard.log")"
-    sleep 0.1
-done
-grep -q serving "$scratch/deard.log" \
-    || fail "the aarch64 deard did not say 'serving' in 120 s: $(cat "$scratch/deard.log")"
+wait_for_serving "$daemon_pid" "$scratch/deard.log" 120 "the aarch64 deard"
 echo "deard serving after $(since "$t") s"
 listing=$("${qemu[@]}" "$a64/dear" list 2>&1) || fail "the aarch64 dear list failed: $listing"
 grep -q "^ *$service " <<<"$listing" || fail "the aarch64 dear list does not show $service: $listing"

@@ -114,10 +114,7 @@ cleanup() {
     fi
     if dpkg -s deard >/dev/null 2>&1; then dpkg --purge deard >/dev/null 2>&1 || true; fi
     rm -rf /run/deard /etc/deard /var/lib/deard
-    for u in "$app_user" deard; do
-        getent passwd "$u" >/dev/null && userdel "$u"
-    done
-    getent group dear >/dev/null && groupdel dear
+    remove_accounts dear "$app_user" deard
     if [ "$rc" = 0 ]; then
         rm -rf "$scratch"
         echo "test-deb: ok"
@@ -200,13 +197,7 @@ step "ExecStart=$exec_start as $user:$group, $environment"
     env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin $environment $exec_start) \
     >"$scratch/deard.log" 2>&1 &
 daemon_pid=$!
-for _ in $(seq 600); do
-    grep -q serving "$scratch/deard.log" && break
-    kill -0 "$daemon_pid" 2>/dev/null || fail "the installed deard exited: $(cat "$scratch/deard.log")"
-    sleep 0.1
-done
-grep -q serving "$scratch/deard.log" \
-    || fail "the installed deard did not say 'serving' in 60 s: $(cat "$scratch/deard.log")"
+wait_for_serving "$daemon_pid" "$scratch/deard.log" 60 "the installed deard"
 pgrep -u "$user" -x deard >/dev/null || fail "no deard process of user $user"
 
 client_root=${environment#*DEAR_IOX2_ROOT=}

@@ -94,6 +94,7 @@ vm_dir=$here/v4l2-vm
 die() { echo "test-v4l2-vm: $*" >&2; exit 1; }
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 SCRIPT_NAME=test-v4l2-vm
+# shellcheck source=scripts/lib.sh
 . "$here/lib.sh"
 
 bins=() files=() run_script="" vivid_params="" vm_timeout=600 self_test=false prepare_only=false
