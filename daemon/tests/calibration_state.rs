@@ -1,31 +1,27 @@
 //! `[runtime] state_file`: a real daemon running the DEAR chain online saves its calibration
 //! estimate, and the next start restores it (with its age in the log).
 
-use std::process::Command;
-
 use deard::calibration_state::CalibrationState;
+
+mod support;
 
 fn run_deard(config: &std::path::Path, test: &str) -> String {
     let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
     let bundle = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/edge");
-    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
-        .args(["--config", config.to_str().unwrap(), "--replay", demo])
-        .args([
-            "--bundle",
-            bundle,
-            "--pacing",
-            "fast",
-            "--end",
-            "12",
-            "--exit-when-done",
-        ])
-        .args(["--online-network", "inline"])
-        .args([
-            "--service",
-            &format!("dear-test/{}/{test}/frames", std::process::id()),
-        ])
-        .output()
-        .expect("run deard");
+    let args = [
+        "--replay",
+        demo,
+        "--bundle",
+        bundle,
+        "--pacing",
+        "fast",
+        "--end",
+        "12",
+        "--exit-when-done",
+        "--online-network",
+        "inline",
+    ];
+    let out = support::run_deard(config, &args, test);
     let log = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(out.status.success(), "{log}");
     log
