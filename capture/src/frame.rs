@@ -107,13 +107,6 @@ pub struct Sample {
     pub truth: GroundTruth,
 }
 
-impl Sample {
-    /// `(height, width)`.
-    pub fn dim(&self) -> (usize, usize) {
-        self.frame.dim()
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::is_valid_depth;
