@@ -25,8 +25,10 @@ pub struct CalibrationState {
     pub calibration: Calibration,
     /// The estimator's quality in [0, 1] when it was saved.
     pub quality: f32,
-    /// When it was saved, seconds since the Unix epoch.
-    pub saved_unix_s: f64,
+    /// When it was saved, milliseconds since the Unix epoch. An integer: serde_json's default
+    /// float parser can read a written f64 back one ulp off, and the file must read back as
+    /// it was written.
+    pub saved_unix_ms: u64,
     /// The source it was estimated on (for a reader; not checked).
     pub source: String,
 }
@@ -81,9 +83,7 @@ impl CalibrationState {
             height: header.height,
             calibration,
             quality: header.calib_quality,
-            saved_unix_s: SystemTime::now()
-                .duration_since(UNIX_EPOCH)
-                .map_or(0.0, |d| d.as_secs_f64()),
+            saved_unix_ms: unix_ms(SystemTime::now()),
             source: source.into(),
         })
     }
@@ -130,11 +130,14 @@ impl CalibrationState {
 
     /// How long ago it was saved (zero for a clock that went back).
     pub fn age(&self) -> Duration {
-        let now = SystemTime::now()
-            .duration_since(UNIX_EPOCH)
-            .map_or(0.0, |d| d.as_secs_f64());
-        Duration::from_secs_f64((now - self.saved_unix_s).max(0.0))
+        Duration::from_millis(unix_ms(SystemTime::now()).saturating_sub(self.saved_unix_ms))
     }
+}
+
+/// Milliseconds since the Unix epoch (0 for a clock set before it).
+fn unix_ms(t: SystemTime) -> u64 {
+    t.duration_since(UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_millis()).unwrap_or(u64::MAX))
 }
 
 #[cfg(test)]
