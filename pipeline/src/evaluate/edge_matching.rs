@@ -128,6 +128,8 @@ pub fn estimate_calibration(
     let depth = Array2::from_shape_vec((1, n), z).expect("1×n");
     let options = RobustOptions {
         huber_delta_px: 1.5,
+        // Every match: they are a few hundred, and a grid step would skip whole columns of them.
+        max_samples: 0,
         ..RobustOptions::default()
     };
     solve_calibration_robust(&flow, depth.view(), None, options).map(|fit| (fit, n))
