@@ -125,9 +125,10 @@ pub struct SplatScratch {
     landing: Vec<[f32; 2]>,
     /// Depth-only path: the source depth, row-major.
     source: Vec<f32>,
-    /// Depth-only path: lowest and highest landing row of each source row (`(∞, −∞)` when the
-    /// row has no valid source), so a band skips the source rows that cannot reach it.
-    row_span: Vec<(f32, f32)>,
+    /// Depth-only path: lowest and highest landing row of each [`SPAN_CHUNK`]-pixel run of a
+    /// source row (`(∞, −∞)` when it has no valid source), row-major, so a band skips the
+    /// runs that cannot reach it.
+    span: Vec<(f32, f32)>,
     /// Depth-only path, per target pixel: `[z-buffer, front weight, any weight, depth sum]`
     /// side by side, the four values each tap touches.
     acc: Vec<[f32; 4]>,
@@ -201,10 +202,16 @@ impl SplatScratch {
     }
 }
 
+/// Source pixels per landing-row span of the depth-only splat. Per row, one flying pixel or a
+/// near outlier (its flow `t/z` is tens of pixels) stretched the whole row's span over most
+/// bands, and every band then walked nearly every source row: the splat was the frame path's
+/// largest stage at 640×480. With 64-pixel runs an outlier widens only its own run.
+const SPAN_CHUNK: usize = 64;
+
 /// Calls `f(target index within the band, weight, source depth)` for every tap of the
 /// depth-only splat that lands in target rows `r0..r1`, in row-major source order and the
-/// fixed tap order (those of [`splat_taps`]), skipping source rows whose span cannot reach
-/// the band. A tap row is `floor(ty)` or `floor(ty) + 1`.
+/// fixed tap order (those of [`splat_taps`]), skipping the [`SPAN_CHUNK`] runs whose span
+/// cannot reach the band. A tap row is `floor(ty)` or `floor(ty) + 1`.
 #[inline(always)]
 fn band_taps(
     landing: &[[f32; 2]],
@@ -215,12 +222,14 @@ fn band_taps(
     mut f: impl FnMut(usize, f32, f32),
 ) {
     let (r0i, r1i) = (r0 as i64, r1 as i64);
-    for (sy, &(lo, hi)) in spans.iter().enumerate() {
+    let runs = w.div_ceil(SPAN_CHUNK);
+    for (run, &(lo, hi)) in spans.iter().enumerate() {
         if !(hi >= r0 as f32 - 1.0 && lo < r1 as f32) {
             continue;
         }
-        let land = &landing[sy * w..(sy + 1) * w];
-        let src = &source[sy * w..(sy + 1) * w];
+        let (sy, start) = (run / runs, (run % runs) * SPAN_CHUNK);
+        let range = sy * w + start..sy * w + (start + SPAN_CHUNK).min(w);
+        let (land, src) = (&landing[range.clone()], &source[range]);
         for (&[tx, ty], &z) in land.iter().zip(src) {
             let Some((x0, y0, wts)) = splat_cell(tx, ty) else {
                 continue;
@@ -269,7 +278,8 @@ impl SplatScratch {
         let n = h * w;
         self.landing.resize(n, [0.0; 2]);
         self.source.resize(n, 0.0);
-        self.row_span.resize(h, (0.0, 0.0));
+        let runs = w.div_ceil(SPAN_CHUNK);
+        self.span.resize(h * runs, (0.0, 0.0));
         if n == 0 {
             return;
         }
@@ -277,25 +287,25 @@ impl SplatScratch {
         self.landing[..n]
             .par_chunks_mut(w)
             .zip(self.source[..n].par_chunks_mut(w))
-            .zip(self.row_span[..h].par_iter_mut())
+            .zip(self.span[..h * runs].par_chunks_mut(runs))
             .zip(depth.axis_iter(Axis(0)).into_par_iter())
             .enumerate()
-            .for_each(|(y, (((land, src), span), row))| {
-                let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            .for_each(|(y, (((land, src), spans), row))| {
+                spans.fill((f32::INFINITY, f32::NEG_INFINITY));
                 for (x, ((l, s), &z)) in land.iter_mut().zip(src.iter_mut()).zip(row).enumerate() {
                     *s = z;
                     *l = match landing(&p, y, x, z) {
                         Some((tx, ty)) => {
                             if splat_cell(tx, ty).is_some() {
-                                lo = lo.min(ty);
-                                hi = hi.max(ty);
+                                let (lo, hi) = &mut spans[x / SPAN_CHUNK];
+                                *lo = lo.min(ty);
+                                *hi = hi.max(ty);
                             }
                             [tx, ty]
                         }
                         None => [f32::NAN; 2],
                     };
                 }
-                *span = (lo, hi);
             });
     }
 
@@ -322,7 +332,12 @@ impl SplatScratch {
         self.acc.resize(n, [0.0; 4]);
         let p = *perturbation;
         let rows = band_rows(h);
-        let (landing, source, spans) = (&self.landing[..n], &self.source[..n], &self.row_span[..h]);
+        let runs = w.div_ceil(SPAN_CHUNK);
+        let (landing, source, spans) = (
+            &self.landing[..n],
+            &self.source[..n],
+            &self.span[..h * runs],
+        );
         let band = |b: usize, acc: &mut [[f32; 4]], out: &mut [f32], flow: Option<FlowOut<'_>>| {
             let r0 = b * rows;
             let r1 = r0 + acc.len() / w;
