@@ -5,9 +5,15 @@
 //! ```text
 //! cargo build --release -p dear-pipeline --example stage_profile
 //! target/release/examples/stage_profile CAPTURE BUNDLE [--full] [--iters N] [--dump DIR]
+//!     [--worker N] [--tract-threads N]
 //! ```
 //!
-//! Prints the median (and minimum) milliseconds per stage. `--dump DIR` writes every geometry
+//! Prints the median (and minimum) milliseconds per stage. `--worker N` also times, N times,
+//! the parts of the background worker's measurement (`DearChain::measure`) on the same frame:
+//! the rough-flow network, the robust least squares of its flow and the direct fit to the
+//! edges, and prints the fitted calibrations' bit patterns (to check an optimisation leaves
+//! them unchanged). `--tract-threads N` runs the refine graph on a pool of N threads (build with
+//! `--features multithread`; without it the option has no effect). `--dump DIR` writes every geometry
 //! stage's output for the frame as raw little-endian bytes (and the edge check's numbers as
 //! bit patterns), so an optimisation can be checked to leave them bit-identical with `cmp`.
 //! The dumped confidence is computed against the aligned (splatted) depth rather than the
@@ -20,10 +26,14 @@ use dear_pipeline::align::StaticAligner;
 use dear_pipeline::capture::CaptureDir;
 use dear_pipeline::dear::confidence::confidence_into;
 use dear_pipeline::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
+use dear_pipeline::direct::{estimate_calibration_direct, DirectFitParams};
 use dear_pipeline::filter::ClassicalRefiner;
+use dear_pipeline::frame::Flow;
+use dear_pipeline::geometry::RobustOptions;
 use dear_pipeline::geometry::{warp_bilinear, warp_depth};
-use dear_pipeline::model::{BundleRunner, ModelBundle};
+use dear_pipeline::model::{BundleRunner, ModelBundle, RunnerOptions};
 use dear_pipeline::online::residual::EdgeCheck;
+use dear_pipeline::online::Measurement;
 use dear_pipeline::Calibration;
 use ndarray::Array2;
 
@@ -48,19 +58,27 @@ fn write_f32(dir: &Path, name: &str, a: &Array2<f32>) {
 fn main() {
     let mut args = std::env::args().skip(1);
     let (mut positional, mut full, mut iters, mut dump) = (Vec::new(), false, 20usize, None);
+    let (mut worker, mut tract_threads) = (0usize, 1usize);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--full" => full = true,
             "--iters" => iters = args.next().unwrap().parse().unwrap(),
             "--dump" => dump = Some(PathBuf::from(args.next().unwrap())),
+            "--worker" => worker = args.next().unwrap().parse().unwrap(),
+            "--tract-threads" => tract_threads = args.next().unwrap().parse().unwrap(),
             _ => positional.push(a),
         }
     }
     let cap = CaptureDir::open(&positional[0]).unwrap();
     let f = cap.read_frame(0).unwrap();
     let (h, w) = f.dim();
-    let bundle = full.then(|| ModelBundle::load(&positional[1]).unwrap());
-    let mut runner = bundle.as_ref().map(|b| BundleRunner::new(b, w, h).unwrap());
+    let bundle = (full || worker > 0).then(|| ModelBundle::load(&positional[1]).unwrap());
+    let mut runner = bundle.as_ref().filter(|_| full).map(|b| {
+        let options = RunnerOptions {
+            threads: tract_threads,
+        };
+        BundleRunner::with_options(b, w, h, options).unwrap()
+    });
     let calib = Calibration {
         tx: 6.0,
         ty: -2.0,
@@ -146,6 +164,10 @@ fn main() {
     }
     println!("{:20} {total:8.2}", "geometry total");
 
+    if let Some(bundle) = bundle.as_ref().filter(|_| worker > 0) {
+        profile_worker(bundle, &f, worker);
+    }
+
     if let Some(dir) = dump {
         std::fs::create_dir_all(&dir).unwrap();
         for (k, p) in rgbp.iter().enumerate() {
@@ -173,5 +195,83 @@ fn main() {
         });
         std::fs::write(dir.join("edge.txt"), format!("{edge:?}\n")).unwrap();
         println!("dumped to {}", dir.display());
+    }
+}
+
+/// Times the parts of the worker's measurement on `f`, `n` times, and prints the fits' bits.
+fn profile_worker(bundle: &ModelBundle, f: &dear_pipeline::capture::RgbdFrame, n: usize) {
+    let (h, w) = f.dim();
+    let mut runner = BundleRunner::new(bundle, w, h).unwrap();
+    let norm = bundle.normalisation();
+    let mut rgbp = [
+        Array2::<f32>::zeros((h, w)),
+        Array2::zeros((h, w)),
+        Array2::zeros((h, w)),
+    ];
+    let mut amp = Array2::<f32>::zeros((h, w));
+    let mut scratch = Vec::new();
+    let mut flow = Flow::zeros(h, w);
+    let mut drgb = Array2::<f32>::zeros((h, w));
+    let mut t = [Vec::new(), Vec::new(), Vec::new(), Vec::new()];
+    let mut fits = None;
+    for _ in 0..n {
+        let c = Instant::now();
+        rgb_planes_into(f.rgb.view(), &mut rgbp);
+        normalize_amplitude_into(
+            f.amplitude.view(),
+            f.depth.view(),
+            norm.amplitude_percentile,
+            &mut scratch,
+            amp.view_mut(),
+        );
+        let [r, g, b] = &rgbp;
+        runner
+            .flow([r.view(), g.view(), b.view()], amp.view(), &mut flow)
+            .unwrap();
+        let c0 = Instant::now();
+        warp_depth(f.depth.view(), &flow, drgb.view_mut());
+        let c1 = Instant::now();
+        let fit =
+            Measurement::from_flow(&flow, drgb.view(), RobustOptions::default(), 3.0).unwrap();
+        let c2 = Instant::now();
+        let direct = estimate_calibration_direct(
+            f.rgb.view(),
+            f.amplitude.view(),
+            f.depth.view(),
+            fit.calibration,
+            &DirectFitParams::default(),
+        );
+        let c3 = Instant::now();
+        for (k, (a, b)) in [(c, c0), (c0, c1), (c1, c2), (c2, c3)]
+            .into_iter()
+            .enumerate()
+        {
+            t[k].push((b - a).as_secs_f64() * 1e3);
+        }
+        fits = Some((fit.calibration, direct));
+    }
+    println!("worker measurement, {n} iterations: median (min) ms");
+    for (name, v) in [
+        "rough-flow network",
+        "D_rgb (warp)",
+        "least squares",
+        "direct fit",
+    ]
+    .iter()
+    .zip(&mut t)
+    {
+        v.sort_by(f64::total_cmp);
+        println!("{name:20} {:8.2} ({:.2})", v[v.len() / 2], v[0]);
+    }
+    if let Some((lsq, direct)) = fits {
+        let bits = |c: Calibration| [c.tx, c.ty, c.cx, c.cy].map(f32::to_bits);
+        println!("least squares {lsq:?} bits {:x?}", bits(lsq));
+        println!(
+            "direct fit {:?} correlation {} fell back {} bits {:x?}",
+            direct.calibration,
+            direct.correlation,
+            direct.fell_back,
+            bits(direct.calibration)
+        );
     }
 }
