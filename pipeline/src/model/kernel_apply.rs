@@ -48,6 +48,9 @@ impl GatedKernel {
     }
 }
 
+/// Largest map stride [`upsample_row`] handles (manifests allow powers of two up to 8).
+const MAX_UPSAMPLE_STRIDE: usize = 16;
+
 /// Two source indices and the weight of the second.
 type Tap = (u32, u32, f32);
 
@@ -71,9 +74,19 @@ fn taps(n_out: usize, n_in: usize, stride: usize) -> Vec<Tap> {
 /// the kernel arithmetic; the fractions are exact in `f32` for the power-of-two strides a
 /// manifest allows, so the result is bit-identical to the tap form.
 fn upsample_row(low: &[f32], stride: usize, out: &mut [f32]) {
+    assert!(
+        (1..=MAX_UPSAMPLE_STRIDE).contains(&stride),
+        "upsampling stride {stride} outside 1..={MAX_UPSAMPLE_STRIDE}"
+    );
     let (n, w) = (low.len(), out.len());
     let lead = (stride / 2).min(w);
     out[..lead].fill(low[0]);
+    // The fractions of a run, computed once per row instead of a division per output pixel.
+    let mut fractions = [0.0f32; MAX_UPSAMPLE_STRIDE];
+    for (p, f) in fractions.iter_mut().enumerate().take(stride) {
+        *f = (p as f32 + 0.5) / stride as f32;
+    }
+    let fractions = &fractions[..stride.min(MAX_UPSAMPLE_STRIDE)];
     let mut x = lead;
     for pair in low.windows(2) {
         if x >= w {
@@ -81,8 +94,7 @@ fn upsample_row(low: &[f32], stride: usize, out: &mut [f32]) {
         }
         let (a, d) = (pair[0], pair[1] - pair[0]);
         let end = (x + stride).min(w);
-        for (p, o) in out[x..end].iter_mut().enumerate() {
-            let f = (p as f32 + 0.5) / stride as f32;
+        for (o, &f) in out[x..end].iter_mut().zip(fractions) {
             *o = a + f * d;
         }
         x = end;
@@ -280,7 +292,7 @@ impl RowScratch {
 /// One output row, written as loops over the row's pixels (structure of arrays) so that the
 /// compiler vectorises them; `exp_fast` is branch-free for the same reason.
 #[allow(clippy::too_many_arguments)]
-#[multiversion::multiversion(targets("x86_64+avx2+fma"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
 fn gated_row(
     sc: &mut RowScratch,
     maps: &[Array2<f32>],
