@@ -121,14 +121,15 @@ pub struct SplatScratch {
     /// Weight of every surface that landed, front or not.
     any_weight: Vec<f32>,
     depth_sum: Vec<f32>,
-    /// Depth-only path: `[x, y]` landing point of every source pixel (NaN: no valid source).
-    landing: Vec<[f32; 2]>,
+    /// Depth-only path: the splat cell of every source pixel ([`splat_cell`] of its landing
+    /// point, computed once: each band's two passes read it instead of recomputing it).
+    cells: Vec<Cell>,
     /// Depth-only path: the source depth, row-major.
     source: Vec<f32>,
-    /// Depth-only path: lowest and highest landing row of each [`SPAN_CHUNK`]-pixel run of a
-    /// source row (`(∞, −∞)` when it has no valid source), row-major, so a band skips the
+    /// Depth-only path: lowest and highest top tap row of each [`SPAN_CHUNK`]-pixel run of a
+    /// source row (`(i32::MAX, i32::MIN)` when it has no cell), row-major, so a band skips the
     /// runs that cannot reach it.
-    span: Vec<(f32, f32)>,
+    span: Vec<(i32, i32)>,
     /// Depth-only path, per target pixel: `[z-buffer, front weight, any weight, depth sum]`
     /// side by side, the four values each tap touches.
     acc: Vec<[f32; 4]>,
@@ -208,15 +209,26 @@ impl SplatScratch {
 /// largest stage at 640×480. With 64-pixel runs an outlier widens only its own run.
 const SPAN_CHUNK: usize = 64;
 
+/// A source pixel's [`splat_cell`]: the top-left tap `(x0, y0)` and the four bilinear weights;
+/// `y0 == NO_CELL` when the pixel has none (invalid depth or a non-finite landing point).
+#[derive(Debug, Clone, Copy, Default)]
+struct Cell {
+    x0: i32,
+    y0: i32,
+    wts: [f32; 4],
+}
+
+const NO_CELL: i32 = i32::MIN;
+
 /// Calls `f(target index within the band, weight, source depth)` for every tap of the
 /// depth-only splat that lands in target rows `r0..r1`, in row-major source order and the
 /// fixed tap order (those of [`splat_taps`]), skipping the [`SPAN_CHUNK`] runs whose span
 /// cannot reach the band. A tap row is `floor(ty)` or `floor(ty) + 1`.
 #[inline(always)]
 fn band_taps(
-    landing: &[[f32; 2]],
+    cells: &[Cell],
     source: &[f32],
-    spans: &[(f32, f32)],
+    spans: &[(i32, i32)],
     w: usize,
     (r0, r1): (usize, usize),
     mut f: impl FnMut(usize, f32, f32),
@@ -224,16 +236,17 @@ fn band_taps(
     let (r0i, r1i) = (r0 as i64, r1 as i64);
     let runs = w.div_ceil(SPAN_CHUNK);
     for (run, &(lo, hi)) in spans.iter().enumerate() {
-        if !(hi >= r0 as f32 - 1.0 && lo < r1 as f32) {
+        if !(i64::from(hi) + 1 >= r0i && i64::from(lo) < r1i) {
             continue;
         }
         let (sy, start) = (run / runs, (run % runs) * SPAN_CHUNK);
         let range = sy * w + start..sy * w + (start + SPAN_CHUNK).min(w);
-        let (land, src) = (&landing[range.clone()], &source[range]);
-        for (&[tx, ty], &z) in land.iter().zip(src) {
-            let Some((x0, y0, wts)) = splat_cell(tx, ty) else {
+        let (cells, src) = (&cells[range.clone()], &source[range]);
+        for (cell, &z) in cells.iter().zip(src) {
+            if cell.y0 == NO_CELL {
                 continue;
-            };
+            }
+            let (x0, y0, wts) = (i64::from(cell.x0), i64::from(cell.y0), cell.wts);
             if y0 + 1 < r0i || y0 >= r1i {
                 continue;
             }
@@ -270,40 +283,43 @@ fn band_rows(h: usize) -> usize {
 }
 
 impl SplatScratch {
-    /// Step 1 of the depth-only splat: every source pixel's landing point and each source
-    /// row's span of landing rows. Rows run in parallel; each value is computed exactly as
-    /// [`landing`] does.
+    /// Step 1 of the depth-only splat: every source pixel's splat cell (its [`landing`] point
+    /// through [`splat_cell`]) and each run's span of landing rows. Rows run in parallel.
     pub(crate) fn prepare(&mut self, depth: ArrayView2<f32>, perturbation: &Calibration) {
         let (h, w) = depth.dim();
         let n = h * w;
-        self.landing.resize(n, [0.0; 2]);
+        self.cells.resize(n, Cell::default());
         self.source.resize(n, 0.0);
         let runs = w.div_ceil(SPAN_CHUNK);
-        self.span.resize(h * runs, (0.0, 0.0));
+        self.span.resize(h * runs, (0, 0));
         if n == 0 {
             return;
         }
         let p = *perturbation;
-        self.landing[..n]
+        self.cells[..n]
             .par_chunks_mut(w)
             .zip(self.source[..n].par_chunks_mut(w))
             .zip(self.span[..h * runs].par_chunks_mut(runs))
             .zip(depth.axis_iter(Axis(0)).into_par_iter())
             .enumerate()
-            .for_each(|(y, (((land, src), spans), row))| {
-                spans.fill((f32::INFINITY, f32::NEG_INFINITY));
-                for (x, ((l, s), &z)) in land.iter_mut().zip(src.iter_mut()).zip(row).enumerate() {
+            .for_each(|(y, (((cells, src), spans), row))| {
+                spans.fill((i32::MAX, i32::MIN));
+                for (x, ((c, s), &z)) in cells.iter_mut().zip(src.iter_mut()).zip(row).enumerate() {
                     *s = z;
-                    *l = match landing(&p, y, x, z) {
-                        Some((tx, ty)) => {
-                            if splat_cell(tx, ty).is_some() {
-                                let (lo, hi) = &mut spans[x / SPAN_CHUNK];
-                                *lo = lo.min(ty);
-                                *hi = hi.max(ty);
-                            }
-                            [tx, ty]
+                    let cell = landing(&p, y, x, z).and_then(|(tx, ty)| splat_cell(tx, ty));
+                    *c = match cell {
+                        // splat_cell's corners come from i32 (|t| < 1e9).
+                        Some((x0, y0, wts)) => {
+                            let (x0, y0) = (x0 as i32, y0 as i32);
+                            let (lo, hi) = &mut spans[x / SPAN_CHUNK];
+                            *lo = (*lo).min(y0);
+                            *hi = (*hi).max(y0);
+                            Cell { x0, y0, wts }
                         }
-                        None => [f32::NAN; 2],
+                        None => Cell {
+                            y0: NO_CELL,
+                            ..Cell::default()
+                        },
                     };
                 }
             });
@@ -333,23 +349,19 @@ impl SplatScratch {
         let p = *perturbation;
         let rows = band_rows(h);
         let runs = w.div_ceil(SPAN_CHUNK);
-        let (landing, source, spans) = (
-            &self.landing[..n],
-            &self.source[..n],
-            &self.span[..h * runs],
-        );
+        let (cells, source, spans) = (&self.cells[..n], &self.source[..n], &self.span[..h * runs]);
         let band = |b: usize, acc: &mut [[f32; 4]], out: &mut [f32], flow: Option<FlowOut<'_>>| {
             let r0 = b * rows;
             let r1 = r0 + acc.len() / w;
             acc.fill([f32::INFINITY, 0.0, 0.0, 0.0]);
             // Pass 1: z-buffer.
-            band_taps(landing, source, spans, w, (r0, r1), |t, _, z| {
+            band_taps(cells, source, spans, w, (r0, r1), |t, _, z| {
                 if z < acc[t][0] {
                     acc[t][0] = z;
                 }
             });
             // Pass 2: accumulate the front surface.
-            band_taps(landing, source, spans, w, (r0, r1), |t, wt, z| {
+            band_taps(cells, source, spans, w, (r0, r1), |t, wt, z| {
                 let a = &mut acc[t];
                 a[2] += wt;
                 if same_surface(a[0], z) {
