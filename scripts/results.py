@@ -305,7 +305,11 @@ def table_daemon(benches: list[Path]) -> list[str]:
 #: says which limit a stage is far from, not a precise fraction.
 STAGE_WORK: dict[str, tuple[str, float, float]] = {
     "preprocess": ("RGB planes, amplitude normalisation and its percentile", 31, 8),
-    "flow": ("splat (two scatter passes over 4 taps), flow from depth, fallback", 140, 60),
+    "flow": (
+        "splat (cells computed once, two scatter passes over 4 taps), flow from depth, fallback",
+        130,
+        55,
+    ),
     "warp": ("depth and amplitude backward warps", 56, 40),
     "refine": (
         "classical filter (six stages) + refine graph + Rust tail + confidence + edge check",
