@@ -111,7 +111,7 @@ impl RobustOptions {
     }
 }
 
-/// One usable pixel of the robust fit: its inverse depth (as [`moments`] computes it), depth,
+/// One usable pixel of a fit: its inverse depth (`1 / z` in f64), depth,
 /// flow and the caller's weight.
 #[derive(Debug, Clone, Copy)]
 struct Sample {
@@ -122,10 +122,30 @@ struct Sample {
     w: f32,
 }
 
-/// [`moments`] over gathered samples with the per-sample weight `weight_at(sample)`: the same
-/// sums in the same order as over the full planes restricted to those pixels. The weights are
-/// computed once into `weights` (both passes read them; a Huber weight costs a division, a
-/// square root and the model's flow).
+/// The usable pixels of every `step`-th row and column, in row-major order.
+fn gather(
+    flow: &Flow,
+    depth: &ArrayView2<f32>,
+    weights: Option<&ArrayView2<f32>>,
+    step: usize,
+) -> Vec<Sample> {
+    let mut samples = Vec::new();
+    for (y, row) in depth.outer_iter().enumerate().step_by(step) {
+        for (x, &z) in row.iter().enumerate().step_by(step) {
+            let (u, v) = (flow.u[(y, x)], flow.v[(y, x)]);
+            let w = weights.map_or(1.0, |w| w[(y, x)]);
+            if usable(z, u, v, w).is_some() {
+                let a = 1.0 / z as f64;
+                samples.push(Sample { a, z, u, v, w });
+            }
+        }
+    }
+    samples
+}
+
+/// Weighted moments of the samples with the per-sample weight `weight_at(sample)`, centred in
+/// two passes (means first, then the covariances). The weights are computed once into `weights`
+/// (both passes read them; a Huber weight costs a division, a square root and the model's flow).
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
 fn sample_moments(
     samples: &[Sample],
@@ -207,55 +227,6 @@ fn check_shapes(flow: &Flow, depth: &ArrayView2<f32>, weights: Option<&ArrayView
 fn usable(z: f32, u: f32, v: f32, w: f32) -> Option<f64> {
     (is_valid_depth(z) && u.is_finite() && v.is_finite() && w > 0.0 && w.is_finite())
         .then_some(w as f64)
-}
-
-/// Weighted moments with the per-pixel weight `weight_at(row, col, z, u, v)`.
-fn moments(
-    flow: &Flow,
-    depth: &ArrayView2<f32>,
-    weight_at: impl Fn((usize, usize), f32, f32, f32) -> f32,
-) -> Moments {
-    let (mut n, mut sw, mut sa, mut su, mut sv) = (0usize, 0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    Zip::indexed(depth)
-        .and(&flow.u)
-        .and(&flow.v)
-        .for_each(|p, &z, &u, &v| {
-            if let Some(w) = usable(z, u, v, weight_at(p, z, u, v)) {
-                let a = 1.0 / z as f64;
-                n += 1;
-                sw += w;
-                sa += w * a;
-                su += w * u as f64;
-                sv += w * v as f64;
-            }
-        });
-    let (mean_a, mean_u, mean_v) = if sw > 0.0 {
-        (sa / sw, su / sw, sv / sw)
-    } else {
-        (0.0, 0.0, 0.0)
-    };
-    let (mut saa, mut sau, mut sav) = (0.0f64, 0.0f64, 0.0f64);
-    Zip::indexed(depth)
-        .and(&flow.u)
-        .and(&flow.v)
-        .for_each(|p, &z, &u, &v| {
-            if let Some(w) = usable(z, u, v, weight_at(p, z, u, v)) {
-                let da = 1.0 / z as f64 - mean_a;
-                saa += w * da * da;
-                sau += w * da * (u as f64 - mean_u);
-                sav += w * da * (v as f64 - mean_v);
-            }
-        });
-    Moments {
-        n,
-        sw,
-        mean_a,
-        mean_u,
-        mean_v,
-        saa,
-        sau,
-        sav,
-    }
 }
 
 fn solve_moments(m: &Moments) -> Result<Calibration, LsqError> {
@@ -340,9 +311,8 @@ pub fn solve_calibration(
     weights: Option<ArrayView2<f32>>,
 ) -> Result<CalibrationFit, LsqError> {
     check_shapes(flow, &depth, weights.as_ref());
-    let m = moments(flow, &depth, |p, _, _, _| {
-        weights.as_ref().map_or(1.0, |w| w[p])
-    });
+    let samples = gather(flow, &depth, weights.as_ref(), 1);
+    let m = sample_moments(&samples, &mut Vec::new(), |s| s.w);
     let calibration = solve_moments(&m)?;
     Ok(CalibrationFit {
         calibration,
@@ -374,17 +344,7 @@ pub fn solve_calibration_robust(
     check_shapes(flow, &depth, weights.as_ref());
     // The usable pixels of the sampling grid, gathered once: every pass below reads only them.
     let step = options.sample_step(depth.dim());
-    let mut samples = Vec::new();
-    for (y, row) in depth.outer_iter().enumerate().step_by(step) {
-        for (x, &z) in row.iter().enumerate().step_by(step) {
-            let (u, v) = (flow.u[(y, x)], flow.v[(y, x)]);
-            let w = weights.as_ref().map_or(1.0, |w| w[(y, x)]);
-            if usable(z, u, v, w).is_some() {
-                let a = 1.0 / z as f64;
-                samples.push(Sample { a, z, u, v, w });
-            }
-        }
-    }
+    let samples = gather(flow, &depth, weights.as_ref(), step);
     let mut weights = Vec::with_capacity(samples.len());
     let mut calibration = solve_moments(&sample_moments(&samples, &mut weights, |s| s.w))?;
     let delta = options.huber_delta_px.max(f32::MIN_POSITIVE);
