@@ -12,7 +12,7 @@
 //! caller that knows `t` (the daemon's filtered estimate) can still update the offsets with
 //! `c = W̄ − t·ā`. There is no silent fallback to `t = 0`.
 
-use ndarray::{ArrayView2, Zip};
+use ndarray::ArrayView2;
 use thiserror::Error;
 
 use crate::calibration::Calibration;
@@ -268,24 +268,14 @@ fn residual(c: &Calibration, z: f32, u: f32, v: f32) -> f32 {
     (du * du + dv * dv).sqrt()
 }
 
-/// Weighted RMS end-point residual with the caller's weights.
-fn rms_residual(
-    c: &Calibration,
-    flow: &Flow,
-    depth: &ArrayView2<f32>,
-    weights: Option<&ArrayView2<f32>>,
-) -> f32 {
+/// Weighted RMS end-point residual of `c` over the samples, with the caller's weights.
+fn rms_residual(c: &Calibration, samples: &[Sample]) -> f32 {
     let (mut se, mut sw) = (0.0f64, 0.0f64);
-    Zip::indexed(depth)
-        .and(&flow.u)
-        .and(&flow.v)
-        .for_each(|p, &z, &u, &v| {
-            if let Some(w) = usable(z, u, v, weights.map_or(1.0, |w| w[p])) {
-                let r = residual(c, z, u, v) as f64;
-                se += w * r * r;
-                sw += w;
-            }
-        });
+    for s in samples {
+        let r = residual(c, s.z, s.u, s.v) as f64;
+        se += s.w as f64 * r * r;
+        sw += s.w as f64;
+    }
     if sw > 0.0 {
         (se / sw).sqrt() as f32
     } else {
@@ -316,7 +306,7 @@ pub fn solve_calibration(
     let calibration = solve_moments(&m)?;
     Ok(CalibrationFit {
         calibration,
-        rms_residual_px: rms_residual(&calibration, flow, &depth, weights.as_ref()),
+        rms_residual_px: rms_residual(&calibration, &samples),
         pixels_used: m.n,
     })
 }
@@ -378,20 +368,9 @@ pub fn solve_calibration_robust(
             break;
         }
     }
-    // The residual with the caller's weights, over the samples.
-    let (mut se, mut sw) = (0.0f64, 0.0f64);
-    for s in &samples {
-        let r = residual(&calibration, s.z, s.u, s.v) as f64;
-        se += s.w as f64 * r * r;
-        sw += s.w as f64;
-    }
     Ok(CalibrationFit {
         calibration,
-        rms_residual_px: if sw > 0.0 {
-            (se / sw).sqrt() as f32
-        } else {
-            0.0
-        },
+        rms_residual_px: rms_residual(&calibration, &samples),
         pixels_used: samples.len(),
     })
 }

@@ -86,7 +86,7 @@ fn upsample_row(low: &[f32], stride: usize, out: &mut [f32]) {
     for (p, f) in fractions.iter_mut().enumerate().take(stride) {
         *f = (p as f32 + 0.5) / stride as f32;
     }
-    let fractions = &fractions[..stride.min(MAX_UPSAMPLE_STRIDE)];
+    let fractions = &fractions[..stride];
     let mut x = lead;
     for pair in low.windows(2) {
         if x >= w {
