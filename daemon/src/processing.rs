@@ -9,13 +9,14 @@
 //! - **static** (no bundle): align with the static calibration, then the classical edge-aware
 //!   filter (`dear_pipeline::filter`).
 
+use std::borrow::Borrow;
 use std::time::{Duration, Instant};
 
 use dear_capture::{Calibration, RgbdFrame};
 use dear_pipeline::align::StaticAligner;
 use dear_pipeline::dear::{
-    BackgroundCalibrator, ChainError, ChainInput, ChainMode, ChainOutput, DearChain,
-    RefinementCheck, Submit,
+    BackgroundCalibrator, ChainError, ChainInput, ChainMode, ChainOutput, ChainReport, DearChain,
+    Prepared, RefinementCheck, Submit,
 };
 use dear_pipeline::filter::ClassicalRefiner;
 use dear_pipeline::geometry::LsqError;
@@ -261,14 +262,23 @@ impl Processor {
         self.calibration
     }
 
-    /// Processes `frame` into `out` and fills the header's calibration, flags and stage
-    /// latencies. A frame of the wrong size is an error (the caller skips and counts it).
-    pub fn process_into(
-        &mut self,
-        frame: &RgbdFrame,
-        header: &mut FrameHeader,
-        mut out: FrameOutput<'_>,
-    ) -> Result<(), ProcessError> {
+    /// Whether consecutive frames overlap in [`finish_into`](Self::finish_into): the DEAR
+    /// engine with online calibration whose network frames run on the background worker, so
+    /// that every frame on the frame path is aligned by a calibration and runs no network
+    /// before its refinement.
+    pub fn overlaps_frames(&self) -> bool {
+        matches!(
+            &self.engine,
+            Engine::Dear {
+                online: Some(_),
+                background: Some(_),
+                ..
+            }
+        )
+    }
+
+    /// A frame of the wrong size is an error (the caller skips and counts it).
+    fn check_size(&self, frame: &RgbdFrame) -> Result<(), ProcessError> {
         let (h, w) = frame.dim();
         if (h, w) != (self.height, self.width)
             || frame.rgb.dim() != (h, w, 3)
@@ -284,6 +294,143 @@ impl Processor {
                 stream_height: self.height,
             });
         }
+        Ok(())
+    }
+
+    /// The first half of `frame` (alignment, warps, the classical stage) when the engine
+    /// [overlaps frames](Self::overlaps_frames), aligned with the online estimate as it is now;
+    /// otherwise the frame is only held, and [`finish_into`](Self::finish_into) processes it
+    /// whole as [`process_into`](Self::process_into) does.
+    ///
+    /// # Errors
+    /// As [`process_into`](Self::process_into): the frame is skipped.
+    pub fn prepare<F: Borrow<RgbdFrame>>(
+        &mut self,
+        frame: F,
+    ) -> Result<PreparedFrame<F>, ProcessError> {
+        self.check_size(frame.borrow())?;
+        let prepared = match &mut self.engine {
+            Engine::Dear {
+                chain,
+                online: Some(online),
+                background: Some(_),
+                ..
+            } => {
+                let calibration = online.estimate().unwrap_or(self.calibration);
+                let f = frame.borrow();
+                let prepared = chain
+                    .prepare(chain_input(f), ChainMode::Cached(calibration))
+                    .map_err(|source| ProcessError::Chain {
+                        frame: f.index,
+                        source,
+                    })?;
+                Some(prepared)
+            }
+            _ => None,
+        };
+        Ok(PreparedFrame { frame, prepared })
+    }
+
+    /// Processes `pending` into `out` and fills `header` as [`process_into`](Self::process_into)
+    /// does; when `next` is given, prepares it meanwhile (on the other core, while this frame's
+    /// refine graph runs on one) and returns it. `next` is aligned with the estimate as it is
+    /// before `pending` ends: the online estimator tracks one frame late, and is told so.
+    ///
+    /// # Errors
+    /// As [`process_into`](Self::process_into), for each of the two frames.
+    pub fn finish_into<F: Borrow<RgbdFrame>>(
+        &mut self,
+        pending: PreparedFrame<F>,
+        next: Option<F>,
+        header: &mut FrameHeader,
+        mut out: FrameOutput<'_>,
+    ) -> Finished<F> {
+        let PreparedFrame { frame, prepared } = pending;
+        let frame = frame.borrow();
+        let Some(prepared) = prepared else {
+            let result = self.process_into(frame, header, out);
+            return Finished {
+                result,
+                next: next.map(|n| self.prepare(n)),
+            };
+        };
+        let next_size = next.as_ref().map(|n| self.check_size(n.borrow()));
+        out.rgb.assign(&frame.rgb);
+        let Engine::Dear {
+            chain,
+            online: Some(online),
+            background: Some(worker),
+            bundle_name,
+            health,
+        } = &mut self.engine
+        else {
+            unreachable!("only an overlapping engine prepares frames");
+        };
+        let input = chain_input(frame);
+        let delivered = deliver_background(worker, online);
+        let decision = online.begin_frame();
+        if decision.run_network.is_some() {
+            submit_network(worker, online, input);
+        }
+        let aligned_with = prepared.calibration();
+        let output = ChainOutput {
+            depth: out.depth.view_mut(),
+            confidence: out.confidence.view_mut(),
+        };
+        let next_calibration = online.estimate().unwrap_or(self.calibration);
+        let (finished, next_prepared) = match (next, next_size) {
+            (Some(n), Some(Ok(()))) => {
+                let (finished, next_prepared) = chain.finish_and_prepare(
+                    prepared,
+                    input.rgb,
+                    output,
+                    chain_input(n.borrow()),
+                    ChainMode::Cached(next_calibration),
+                );
+                let index = n.borrow().index;
+                let next_prepared = next_prepared
+                    .map(|p| PreparedFrame {
+                        frame: n,
+                        prepared: Some(p),
+                    })
+                    .map_err(|source| ProcessError::Chain {
+                        frame: index,
+                        source,
+                    });
+                (finished, Some(next_prepared))
+            }
+            (Some(_), Some(Err(e))) => (chain.finish(prepared, input.rgb, output), Some(Err(e))),
+            _ => (chain.finish(prepared, input.rgb, output), None),
+        };
+        let result = finished
+            .map(|report| {
+                let mut publish = Publish {
+                    online: Some(online),
+                    health,
+                    bundle_name,
+                    static_calibration: self.calibration,
+                };
+                publish.report(frame.index, &report, delivered, aligned_with, header);
+            })
+            .map_err(|source| ProcessError::Chain {
+                frame: frame.index,
+                source,
+            });
+        Finished {
+            result,
+            next: next_prepared,
+        }
+    }
+
+    /// Processes `frame` into `out` and fills the header's calibration, flags and stage
+    /// latencies. A frame of the wrong size is an error (the caller skips and counts it).
+    pub fn process_into(
+        &mut self,
+        frame: &RgbdFrame,
+        header: &mut FrameHeader,
+        mut out: FrameOutput<'_>,
+    ) -> Result<(), ProcessError> {
+        self.check_size(frame)?;
         out.rgb.assign(&frame.rgb);
         match &mut self.engine {
             Engine::Static {
@@ -334,11 +481,7 @@ impl Processor {
                 bundle_name,
                 health,
             } => {
-                let input = ChainInput {
-                    rgb: frame.rgb.view(),
-                    amplitude: frame.amplitude.view(),
-                    depth: frame.depth.view(),
-                };
+                let input = chain_input(frame);
                 // A background measurement that finished since the last frame goes to the
                 // estimator before this frame's decision, so this frame already uses it.
                 let delivered = match (background.as_mut(), online.as_mut()) {
@@ -351,18 +494,7 @@ impl Processor {
                     (Some(online), Some(worker)) => {
                         let decision = online.begin_frame();
                         if decision.run_network.is_some() {
-                            if worker.is_busy() || worker.is_stopped() {
-                                online.network_busy();
-                            } else {
-                                let ticket = online.defer_network();
-                                // A frame of the wrong shape fails `process` below too.
-                                if let Ok(Submit::Stopped) = worker.try_submit(input, ticket) {
-                                    tracing::error!(
-                                        "the calibration worker stopped; the calibration is \
-                                         now tracked from the edges only"
-                                    );
-                                }
-                            }
+                            submit_network(worker, online, input);
                         }
                         // Before the first estimate: the static calibration.
                         ChainMode::Cached(decision.calibration.unwrap_or(self.calibration))
@@ -379,56 +511,140 @@ impl Processor {
                             frame: frame.index,
                             source,
                         })?;
-                // This frame's network measurement: inline, or delivered by the worker.
-                let network_measurement = report.measurement.as_ref().or(delivered.as_ref());
-                let fit = network_measurement.and_then(|m| m.as_ref().ok()).copied();
-                header.flags = match &report.rejected_refinement {
-                    None => flags::ALIGNED | flags::REFINED_NETWORK,
-                    Some(_) => {
-                        flags::ALIGNED | flags::REFINED_CLASSICAL | flags::NETWORK_OUTPUT_REJECTED
-                    }
-                };
-                health.record(
-                    frame.index,
+                let mut publish = Publish {
+                    online: online.as_mut(),
+                    health,
                     bundle_name,
-                    report.rejected_refinement.as_ref(),
-                );
-                if report.ran_flow_network || delivered.is_some() {
-                    header.flags |= flags::CALIBRATION_ESTIMATED;
-                }
-                header.set_bundle_name(bundle_name);
-                match online {
-                    Some(online) => {
-                        online.end_frame(report.measurement.clone(), report.alignment);
-                        header.flags |= flags::CALIBRATION_ONLINE;
-                        // Until the first estimate is established, publish what aligned this frame.
-                        let calibration = online
-                            .estimate()
-                            .or(report.calibration)
-                            .unwrap_or(self.calibration);
-                        set_calibration(header, calibration);
-                        header.calib_quality = online.quality();
-                        header.calib_age_frames = online
-                            .frames_since_estimate()
-                            .map_or(u32::MAX, |f| f.min(u32::MAX as u64) as u32);
-                    }
-                    None => {
-                        set_calibration(header, report.calibration.unwrap_or(self.calibration));
-                        header.calib_quality = fit.map_or(0.0, |m| m.fit_quality());
-                        header.calib_age_frames = 0;
-                    }
-                }
-                header.calib_residual_px = fit.and_then(|m| m.residual_px()).unwrap_or(f32::NAN);
-                let t = &report.timings;
-                let us = |d: Duration| d.as_micros().min(u32::MAX as u128) as u32;
-                header.stage_latency_us[Stage::Preprocess as usize] = us(t.preprocess);
-                header.stage_latency_us[Stage::Flow as usize] = us(t.flow + t.calibrate);
-                header.stage_latency_us[Stage::Fuse as usize] = us(t.fuse);
-                header.stage_latency_us[Stage::Warp as usize] = us(t.warp);
-                header.stage_latency_us[Stage::Refine as usize] = us(t.refine);
+                    static_calibration: self.calibration,
+                };
+                publish.report(frame.index, &report, delivered, None, header);
             }
         }
         Ok(())
+    }
+}
+
+/// A frame held between [`Processor::prepare`] and [`Processor::finish_into`].
+pub struct PreparedFrame<F> {
+    frame: F,
+    /// The chain's first half, when the engine overlaps frames.
+    prepared: Option<Prepared>,
+}
+
+impl<F: Borrow<RgbdFrame>> PreparedFrame<F> {
+    /// The frame.
+    pub fn frame(&self) -> &RgbdFrame {
+        self.frame.borrow()
+    }
+}
+
+/// What [`Processor::finish_into`] did.
+pub struct Finished<F> {
+    /// The finished frame's outcome (on `Err` it was not published: skip and count it).
+    pub result: Result<(), ProcessError>,
+    /// The next frame, prepared (or why it cannot be: skip and count it), when one was given.
+    pub next: Option<Result<PreparedFrame<F>, ProcessError>>,
+}
+
+/// A frame's planes as the chain takes them.
+fn chain_input(frame: &RgbdFrame) -> ChainInput<'_> {
+    ChainInput {
+        rgb: frame.rgb.view(),
+        amplitude: frame.amplitude.view(),
+        depth: frame.depth.view(),
+    }
+}
+
+/// A frame on which the online estimator asks for the network, with the network on the
+/// background worker: hands the frame over, or tells the estimator the worker is busy.
+fn submit_network(
+    worker: &mut BackgroundCalibrator<NetworkTicket>,
+    online: &mut OnlineCalibrator,
+    input: ChainInput<'_>,
+) {
+    if worker.is_busy() || worker.is_stopped() {
+        online.network_busy();
+        return;
+    }
+    let ticket = online.defer_network();
+    // A frame of the wrong shape fails the chain too.
+    if let Ok(Submit::Stopped) = worker.try_submit(input, ticket) {
+        tracing::error!(
+            "the calibration worker stopped; the calibration is now tracked from the edges only"
+        );
+    }
+}
+
+/// What a DEAR frame's report does to the header, the network's health and the estimator.
+struct Publish<'a> {
+    online: Option<&'a mut OnlineCalibrator>,
+    health: &'a mut NetworkHealth,
+    bundle_name: &'a str,
+    static_calibration: Calibration,
+}
+
+impl Publish<'_> {
+    /// Fills `header` from the chain's `report` of frame `index` and ends the frame in the
+    /// estimator; `delivered` is a background measurement handed over before it, and
+    /// `aligned_with` the calibration that aligned it when that was not the estimate at the
+    /// frame's start (overlapped frames).
+    fn report(
+        &mut self,
+        index: u64,
+        report: &ChainReport,
+        delivered: Option<Result<Measurement, LsqError>>,
+        aligned_with: Option<Calibration>,
+        header: &mut FrameHeader,
+    ) {
+        // This frame's network measurement: inline, or delivered by the worker.
+        let network_measurement = report.measurement.as_ref().or(delivered.as_ref());
+        let fit = network_measurement.and_then(|m| m.as_ref().ok()).copied();
+        header.flags = match &report.rejected_refinement {
+            None => flags::ALIGNED | flags::REFINED_NETWORK,
+            Some(_) => flags::ALIGNED | flags::REFINED_CLASSICAL | flags::NETWORK_OUTPUT_REJECTED,
+        };
+        self.health
+            .record(index, self.bundle_name, report.rejected_refinement.as_ref());
+        if report.ran_flow_network || delivered.is_some() {
+            header.flags |= flags::CALIBRATION_ESTIMATED;
+        }
+        header.set_bundle_name(self.bundle_name);
+        match self.online.as_mut() {
+            Some(online) => {
+                online.end_frame_aligned_with(
+                    report.measurement.clone(),
+                    report.alignment,
+                    aligned_with,
+                );
+                header.flags |= flags::CALIBRATION_ONLINE;
+                // Until the first estimate is established, publish what aligned this frame.
+                let calibration = online
+                    .estimate()
+                    .or(report.calibration)
+                    .unwrap_or(self.static_calibration);
+                set_calibration(header, calibration);
+                header.calib_quality = online.quality();
+                header.calib_age_frames = online
+                    .frames_since_estimate()
+                    .map_or(u32::MAX, |f| f.min(u32::MAX as u64) as u32);
+            }
+            None => {
+                set_calibration(
+                    header,
+                    report.calibration.unwrap_or(self.static_calibration),
+                );
+                header.calib_quality = fit.map_or(0.0, |m| m.fit_quality());
+                header.calib_age_frames = 0;
+            }
+        }
+        header.calib_residual_px = fit.and_then(|m| m.residual_px()).unwrap_or(f32::NAN);
+        let t = &report.timings;
+        let us = |d: Duration| d.as_micros().min(u32::MAX as u128) as u32;
+        header.stage_latency_us[Stage::Preprocess as usize] = us(t.preprocess);
+        header.stage_latency_us[Stage::Flow as usize] = us(t.flow + t.calibrate);
+        header.stage_latency_us[Stage::Fuse as usize] = us(t.fuse);
+        header.stage_latency_us[Stage::Warp as usize] = us(t.warp);
+        header.stage_latency_us[Stage::Refine as usize] = us(t.refine);
     }
 }
 

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::thread;
 use std::time::{Duration, Instant};
 
-use dear_capture::Calibration;
+use dear_capture::{Calibration, RgbdFrame};
 use dear_proto::{FrameHeader, Stage};
 
 use crate::calibration_state::CalibrationState;
@@ -15,7 +15,7 @@ use crate::capture::replay::{ReplayOpenError, ReplaySource};
 use crate::capture::v4l::{V4lOpenError, V4lSource};
 use crate::capture::{FrameSource, SourceItem};
 use crate::config::{check_calibration_fits, Config, ConfigError, Pacing};
-use crate::processing::{EngineError, Processor};
+use crate::processing::{EngineError, PreparedFrame, Processor};
 use crate::publish::{FramePublisher, PublisherError};
 use crate::queue::{FrameQueue, Overflow};
 use crate::record::{RecordError, Recorder};
@@ -148,8 +148,23 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
     // to `[runtime] state_file` at every statistics line and at shutdown.
     let mut latest_estimate: Option<FrameHeader> = None;
     let description = source_description;
+    // The frame whose first half is done (see `Processor::finish_into`): it is finished beside
+    // the next frame's first half when that one is already queued, alone otherwise, so a frame
+    // never waits for its successor.
+    let mut waiting: Option<Waiting> = None;
+    let mut path = FramePath {
+        publisher: &publisher,
+        processor: &mut processor,
+        stats: &mut stats,
+        latest_estimate: &mut latest_estimate,
+    };
     while !shutdown.load(Ordering::Relaxed) {
-        match queue.pop(Duration::from_millis(100)) {
+        let timeout = if waiting.is_some() {
+            Duration::ZERO
+        } else {
+            Duration::from_millis(100)
+        };
+        match queue.pop(timeout) {
             Some(SourceItem::Frame {
                 frame,
                 arrived,
@@ -158,36 +173,37 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
                 let mut header = FrameHeader::new(frame.index, width, height);
                 header.capture_timestamp_ns = frame.timestamp_ns;
                 header.stage_latency_us[Stage::Capture as usize] = decode_us;
-                header.frames_skipped = stats.skipped;
+                header.frames_skipped = path.stats.skipped;
                 header.frames_dropped = queue.dropped();
-                match publisher.publish(header, arrived, |h, out| {
-                    processor.process_into(&frame, h, out)
-                }) {
-                    Ok(sent) => {
-                        stats.record(&sent);
-                        if sent.flags & dear_proto::flags::CALIBRATION_ONLINE != 0 {
-                            latest_estimate = Some(sent);
-                        }
-                    }
-                    Err(reason) => {
-                        stats.skipped += 1;
-                        tracing::warn!(frame = frame.index, %reason, "frame skipped");
-                    }
-                }
+                let next = Incoming {
+                    frame,
+                    header,
+                    arrived,
+                };
+                waiting = match waiting.take() {
+                    Some(w) => path.finish(w, Some(next)),
+                    None => path.prepare(next),
+                };
             }
             Some(SourceItem::Skipped { frame_id, reason }) => {
-                stats.skipped += 1;
-                tracing::warn!(frame = frame_id, %reason, skipped_total = stats.skipped, "frame skipped");
+                path.stats.skipped += 1;
+                tracing::warn!(frame = frame_id, %reason, skipped_total = path.stats.skipped, "frame skipped");
             }
             Some(SourceItem::Failed { reason }) => {
+                if let Some(w) = waiting.take() {
+                    path.finish(w, None);
+                }
                 failure = Some(reason);
                 break;
             }
             Some(SourceItem::End) => {
+                if let Some(w) = waiting.take() {
+                    path.finish(w, None);
+                }
                 source_ended = true;
                 tracing::info!(
-                    published = stats.published,
-                    skipped = stats.skipped,
+                    published = path.stats.published,
+                    skipped = path.stats.skipped,
                     dropped = queue.dropped(),
                     "source finished"
                 );
@@ -198,7 +214,11 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
                     "keeping the service up until stopped (runtime.exit_when_done = false)"
                 );
             }
-            None => {}
+            None => {
+                if let Some(w) = waiting.take() {
+                    waiting = path.finish(w, None);
+                }
+            }
         }
         // Pinged from the frame loop itself, so a loop stuck in a frame (or anywhere) stops the
         // pings and systemd restarts the service.
@@ -209,18 +229,22 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
             publisher.cleanup_dead_peers();
             last_cleanup = Instant::now();
         }
-        if let Some(report) = stats.poll() {
-            save_calibration(config, latest_estimate.take(), &description);
+        if let Some(report) = path.stats.poll() {
+            save_calibration(config, path.latest_estimate.take(), &description);
             if !(source_ended && report.fps == 0.0) {
                 tracing::info!(
-                    published = stats.published,
-                    skipped = stats.skipped,
+                    published = path.stats.published,
+                    skipped = path.stats.skipped,
                     dropped = queue.dropped(),
-                    network_rejected = processor.network_output_rejected(),
+                    network_rejected = path.processor.network_output_rejected(),
                     "{report}"
                 );
             }
         }
+    }
+    // Stopped with a frame half done: it is finished and published.
+    if let Some(w) = waiting.take() {
+        path.finish(w, None);
     }
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Stopping]);
     save_calibration(config, latest_estimate.take(), &description);
@@ -240,6 +264,99 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
     match failure {
         Some(reason) => Err(RunError::SourceFailed(reason)),
         None => Ok(stats),
+    }
+}
+
+/// A frame as it left the queue, with the header started for it.
+struct Incoming {
+    frame: Box<RgbdFrame>,
+    header: FrameHeader,
+    arrived: Instant,
+}
+
+/// A frame whose first half is done, waiting for its second.
+struct Waiting {
+    prepared: PreparedFrame<Box<RgbdFrame>>,
+    header: FrameHeader,
+    arrived: Instant,
+}
+
+/// What the frame loop hands frames through: processing, publishing and the counts.
+struct FramePath<'a> {
+    publisher: &'a FramePublisher,
+    processor: &'a mut Processor,
+    stats: &'a mut Stats,
+    /// The header of the latest frame whose calibration came from the online estimator.
+    latest_estimate: &'a mut Option<FrameHeader>,
+}
+
+impl FramePath<'_> {
+    /// The first half of `frame`; a frame that cannot be processed is skipped and counted.
+    fn prepare(&mut self, incoming: Incoming) -> Option<Waiting> {
+        let index = incoming.frame.index;
+        match self.processor.prepare(incoming.frame) {
+            Ok(prepared) => Some(Waiting {
+                prepared,
+                header: incoming.header,
+                arrived: incoming.arrived,
+            }),
+            Err(reason) => {
+                self.stats.skipped += 1;
+                tracing::warn!(frame = index, %reason, "frame skipped");
+                None
+            }
+        }
+    }
+
+    /// Finishes and publishes `waiting`, preparing `next` beside it; returns `next`, prepared.
+    /// A frame that cannot be processed or published is skipped and counted.
+    fn finish(&mut self, waiting: Waiting, next: Option<Incoming>) -> Option<Waiting> {
+        let index = waiting.prepared.frame().index;
+        let (mut next_frame, next_meta) = match next {
+            Some(n) => (Some(n.frame), Some((n.header, n.arrived))),
+            None => (None, None),
+        };
+        let mut next_prepared = None;
+        let processor = &mut *self.processor;
+        let published = self
+            .publisher
+            .publish(waiting.header, waiting.arrived, |h, out| {
+                let finished = processor.finish_into(waiting.prepared, next_frame.take(), h, out);
+                next_prepared = finished.next;
+                finished.result
+            });
+        match published {
+            Ok(sent) => {
+                self.stats.record(&sent);
+                if sent.flags & dear_proto::flags::CALIBRATION_ONLINE != 0 {
+                    *self.latest_estimate = Some(sent);
+                }
+            }
+            Err(reason) => {
+                self.stats.skipped += 1;
+                tracing::warn!(frame = index, %reason, "frame skipped");
+            }
+        }
+        let (header, arrived) = next_meta?;
+        match (next_prepared, next_frame) {
+            (Some(Ok(prepared)), _) => Some(Waiting {
+                prepared,
+                header,
+                arrived,
+            }),
+            (Some(Err(reason)), _) => {
+                self.stats.skipped += 1;
+                tracing::warn!(frame = header.frame_id, %reason, "frame skipped");
+                None
+            }
+            // The sample was never filled (no loan): the next frame is prepared on its own.
+            (None, Some(frame)) => self.prepare(Incoming {
+                frame,
+                header,
+                arrived,
+            }),
+            (None, None) => None,
+        }
     }
 }
 

@@ -69,6 +69,61 @@ fn deard_bench_reports_every_measured_frame() {
     // first frames) and then uses it at most on a few.
     assert_eq!(modes[1]["with_network"]["count"].as_u64(), Some(5));
     assert_eq!(modes[0]["mode"], "online");
+    // Back to back, online mode (network in the background) prepares every frame but the
+    // last beside the previous one's refinement; the paper's mode runs a network in every
+    // frame's first half and never overlaps. A frame's latency spans its two halves.
+    assert_eq!(
+        modes[0]["overlapped_frames"].as_u64(),
+        Some(5),
+        "{}",
+        modes[0]
+    );
+    assert_eq!(
+        modes[1]["overlapped_frames"].as_u64(),
+        Some(0),
+        "{}",
+        modes[1]
+    );
+    for m in modes {
+        assert_eq!(m["latency"]["count"].as_u64(), Some(5), "{m}");
+        assert!(m["latency"]["median_ms"].as_f64().unwrap() > 0.0, "{m}");
+    }
+}
+
+#[test]
+fn deard_bench_sequential_never_overlaps_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let json = tmp.path().join("bench.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_deard-bench"))
+        .current_dir(root())
+        .args([
+            "--capture",
+            "samples/demo",
+            "--bundle",
+            "fixtures/bundles/smoke-edge",
+            "--frames",
+            "3",
+            "--warmup",
+            "1",
+            "--mode",
+            "online",
+            "--sequential",
+            "--json",
+        ])
+        .arg(&json)
+        .output()
+        .expect("run deard-bench");
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let online = &report["modes"][0];
+    assert_eq!(online["overlapped_frames"].as_u64(), Some(0), "{online}");
+    assert_eq!(online["all"]["count"].as_u64(), Some(3), "{online}");
 }
 
 #[test]

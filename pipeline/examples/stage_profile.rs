@@ -30,7 +30,7 @@ use dear_pipeline::direct::{estimate_calibration_direct, DirectFitParams};
 use dear_pipeline::filter::ClassicalRefiner;
 use dear_pipeline::frame::Flow;
 use dear_pipeline::geometry::RobustOptions;
-use dear_pipeline::geometry::{warp_bilinear, warp_depth};
+use dear_pipeline::geometry::{warp_depth, warp_depth_and_bilinear};
 use dear_pipeline::model::{BundleRunner, ModelBundle, RunnerOptions};
 use dear_pipeline::online::residual::EdgeCheck;
 use dear_pipeline::online::Measurement;
@@ -124,8 +124,13 @@ fn main() {
         lap(0, &mut t);
         aligner.align_into(f.depth.view(), &calib, drgb.view_mut());
         lap(1, &mut t);
-        warp_depth(f.depth.view(), aligner.flow(), dw.view_mut());
-        warp_bilinear(amp.view(), aligner.flow(), aw.view_mut(), None);
+        warp_depth_and_bilinear(
+            f.depth.view(),
+            amp.view(),
+            aligner.flow(),
+            dw.view_mut(),
+            aw.view_mut(),
+        );
         lap(2, &mut t);
         let refined = match runner.as_mut() {
             Some(runner) => {

@@ -224,3 +224,115 @@ fn the_shipped_chain_finds_no_misalignment_in_aligned_frames() {
     println!("AEPE of the shipped chain on 4 aligned frames: {aepe:.3} px");
     assert!(aepe <= 0.3, "AEPE {aepe:.3} px on aligned frames");
 }
+
+/// Overlapping frames (`finish_and_prepare`: a frame's refinement beside the next frame's
+/// alignment, warps and classical stage) publishes exactly what processing them one by one
+/// does: the halves write separate buffers. Run with the shipped (`hybrid`) bundle, whose
+/// classical stage is part of the first half.
+#[test]
+fn overlapped_frames_publish_the_same_bits_as_one_by_one() {
+    use dear_pipeline::dear::{ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
+    use ndarray::Array2;
+
+    let bundle = ModelBundle::load(root().join("models/edge")).unwrap();
+    let capture = CaptureDir::open(root().join("samples/demo")).unwrap();
+    let (w, h) = capture.size();
+    let (w, h) = (w as usize, h as usize);
+    let calibration = capture.manifest().initial_calibration;
+    // Each frame aligned with a slightly different calibration, as the online estimator's
+    // would be: a frame must be aligned with its own.
+    let mode = |k: usize| {
+        let mut c = calibration;
+        c.cx += 0.25 * k as f32;
+        ChainMode::Cached(c)
+    };
+    let frames: Vec<_> = (0..4).map(|p| capture.read_frame(p).unwrap()).collect();
+    let input = |k: usize| ChainInput {
+        rgb: frames[k].rgb.view(),
+        amplitude: frames[k].amplitude.view(),
+        depth: frames[k].depth.view(),
+    };
+    let planes = || (Array2::<f32>::zeros((h, w)), Array2::<u8>::zeros((h, w)));
+    let strip = |r: ChainReport| ChainReport {
+        timings: Default::default(),
+        ..r
+    };
+
+    let mut one_by_one = DearChain::new(&bundle, w, h).unwrap();
+    let mut expected = Vec::new();
+    for k in 0..frames.len() {
+        let (mut depth, mut confidence) = planes();
+        let output = ChainOutput {
+            depth: depth.view_mut(),
+            confidence: confidence.view_mut(),
+        };
+        let report = one_by_one.process(input(k), mode(k), output).unwrap();
+        expected.push((strip(report), depth, confidence));
+    }
+
+    let mut overlapped = DearChain::new(&bundle, w, h).unwrap();
+    let mut pending = Some(overlapped.prepare(input(0), mode(0)).unwrap());
+    for (k, (report, depth, confidence)) in expected.into_iter().enumerate() {
+        let (mut got_depth, mut got_confidence) = planes();
+        let output = ChainOutput {
+            depth: got_depth.view_mut(),
+            confidence: got_confidence.view_mut(),
+        };
+        let prepared = pending.take().unwrap();
+        let got = if k + 1 < frames.len() {
+            let (finished, next) = overlapped.finish_and_prepare(
+                prepared,
+                frames[k].rgb.view(),
+                output,
+                input(k + 1),
+                mode(k + 1),
+            );
+            pending = Some(next.unwrap());
+            finished.unwrap()
+        } else {
+            overlapped
+                .finish(prepared, frames[k].rgb.view(), output)
+                .unwrap()
+        };
+        assert_eq!(strip(got), report, "frame {k}: report");
+        assert!(
+            got_depth
+                .iter()
+                .zip(&depth)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "frame {k}: depth differs"
+        );
+        assert_eq!(got_confidence, confidence, "frame {k}: confidence");
+        assert!(depth.iter().any(|&z| z > 0.0), "frame {k} has depth");
+    }
+}
+
+/// A frame can only be finished while it is the latest one prepared: finishing an older one
+/// would publish another frame's buffers.
+#[test]
+#[should_panic(expected = "only the latest prepared frame can be finished")]
+fn finishing_a_superseded_frame_is_refused() {
+    use dear_pipeline::dear::{ChainInput, ChainMode, ChainOutput, DearChain};
+    use ndarray::Array2;
+
+    let bundle = ModelBundle::load(root().join("models/edge")).unwrap();
+    let capture = CaptureDir::open(root().join("samples/demo")).unwrap();
+    let (w, h) = capture.size();
+    let (w, h) = (w as usize, h as usize);
+    let frame = capture.read_frame(0).unwrap();
+    let input = ChainInput {
+        rgb: frame.rgb.view(),
+        amplitude: frame.amplitude.view(),
+        depth: frame.depth.view(),
+    };
+    let mode = ChainMode::Cached(capture.manifest().initial_calibration);
+    let mut chain = DearChain::new(&bundle, w, h).unwrap();
+    let first = chain.prepare(input, mode).unwrap();
+    let _second = chain.prepare(input, mode).unwrap();
+    let (mut depth, mut confidence) = (Array2::zeros((h, w)), Array2::zeros((h, w)));
+    let output = ChainOutput {
+        depth: depth.view_mut(),
+        confidence: confidence.view_mut(),
+    };
+    let _ = chain.finish(first, frame.rgb.view(), output);
+}

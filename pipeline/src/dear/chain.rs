@@ -29,7 +29,7 @@ use crate::direct::{estimate_calibration_direct, DirectFitParams};
 use crate::filter::ClassicalRefiner;
 use crate::frame::Flow;
 use crate::geometry::surface::is_valid_depth;
-use crate::geometry::{warp_bilinear, warp_depth, LsqError, RobustOptions};
+use crate::geometry::{warp_depth, warp_depth_and_bilinear, LsqError, RobustOptions};
 use crate::model::{BundleError, BundleRunner, ModelBundle, Normalisation, RunnerOptions};
 use crate::online::residual::{EdgeAlignment, EdgeCheck};
 use crate::online::Measurement;
@@ -220,36 +220,97 @@ pub enum ChainError {
 }
 
 /// The DEAR chain for one stream resolution, with every intermediate buffer preallocated.
+///
+/// A frame is processed in two halves: [`prepare`](Self::prepare) (preprocessing, alignment,
+/// the warps and, for `hybrid` refiners, the classical filter) and [`finish`](Self::finish)
+/// (the refine graph and its tail, the edge check, the output guard and the confidence).
+/// [`process`](Self::process) runs one after the other. The refine graph runs on one core, so
+/// a caller that has the next frame already can [`finish_and_prepare`](Self::finish_and_prepare):
+/// this frame's second half beside the next frame's first half, on the other core. The halves
+/// write separate buffers ([`Staged`] is double-buffered), so the output is the same bits
+/// either way.
 #[derive(Debug)]
 pub struct DearChain {
     runner: BundleRunner,
     norm: Normalisation,
     options: ChainOptions,
-    aligner: StaticAligner,
+    front: FrontEnd,
+    /// The refinement's inputs of the last prepared frame (what `finish` reads).
+    staged: Staged,
     edge_check: EdgeCheck,
+    refined: Array2<f32>,
+    /// The classical refiner frames fall back to when the output guard rejects the network's
+    /// output (other refiners than `hybrid`); made on the first rejection.
+    fallback: Option<ClassicalRefiner>,
+    /// Frames prepared so far: ties a [`Prepared`] to the staged buffers it describes.
+    prepared_count: u64,
+}
+
+/// The first half's state: everything up to the refinement's inputs.
+#[derive(Debug)]
+struct FrontEnd {
+    aligner: StaticAligner,
     scratch: Vec<f32>,
-    rgb: [Array2<f32>; 3],
     amplitude: Array2<f32>,
     flow_rough: Flow,
     depth_rgb: Array2<f32>,
     flow_convt: Flow,
     flow_refined: Flow,
-    depth_warped: Array2<f32>,
-    amplitude_warped: Array2<f32>,
-    refined: Array2<f32>,
-    /// `hybrid` refiners: the classical refiner they build on, its output and confidence.
-    classical: Option<ClassicalStage>,
-    /// The classical refiner frames fall back to when the output guard rejects the network's
-    /// output (other refiners than `hybrid`); made on the first rejection.
-    fallback: Option<ClassicalRefiner>,
+    /// `hybrid` refiners: the classical refiner they build on.
+    classical: Option<ClassicalRefiner>,
+    /// The refinement's inputs being written by `prepare`.
+    staged: Staged,
 }
 
-/// The classical refiner run on the warped depth before a `hybrid` refine graph.
+/// What the second half reads of a prepared frame.
 #[derive(Debug)]
-struct ClassicalStage {
-    refiner: ClassicalRefiner,
-    depth: Array2<f32>,
-    confidence: Array2<u8>,
+struct Staged {
+    rgb: [Array2<f32>; 3],
+    depth_warped: Array2<f32>,
+    amplitude_warped: Array2<f32>,
+    /// `hybrid` refiners: the classical refiner's depth and confidence on the warped depth.
+    classical: Option<(Array2<f32>, Array2<u8>)>,
+}
+
+impl Staged {
+    fn new(height: usize, width: usize, classical: bool) -> Self {
+        let plane = || Array2::zeros((height, width));
+        Staged {
+            rgb: [plane(), plane(), plane()],
+            depth_warped: plane(),
+            amplitude_warped: plane(),
+            classical: classical.then(|| (plane(), Array2::zeros((height, width)))),
+        }
+    }
+}
+
+/// A frame whose first half ([`DearChain::prepare`]) is done: what it found, handed to
+/// [`DearChain::finish`]. Only the latest prepared frame can be finished.
+#[derive(Debug)]
+#[must_use = "a prepared frame is published by `finish`"]
+pub struct Prepared {
+    /// The [`DearChain::prepared_count`] it was made at.
+    id: u64,
+    ran_flow_network: bool,
+    ran_direct_fit: bool,
+    ran_fusion_network: bool,
+    calibration: Option<Calibration>,
+    measurement: Option<Result<Measurement, LsqError>>,
+    amplitude_scale: Option<f32>,
+    timings: StageTimings,
+}
+
+impl Prepared {
+    /// The calibration the frame was aligned with (`None`: a `Full` frame whose fit failed).
+    pub fn calibration(&self) -> Option<Calibration> {
+        self.calibration
+    }
+}
+
+/// Whether preparing a frame in `mode` runs a network (the runner is then busy, so the frame
+/// cannot be prepared beside another's refinement).
+fn prepare_runs_network(mode: ChainMode, options: &ChainOptions) -> bool {
+    matches!(mode, ChainMode::Full) || options.cached_fusion == CachedFusion::Run
 }
 
 impl DearChain {
@@ -273,30 +334,28 @@ impl DearChain {
     ) -> Result<Self, BundleError> {
         let runner = BundleRunner::with_options(bundle, width, height, options.runner)?;
         let plane = || Array2::zeros((height, width));
-        let classical = runner.refine_uses_classical().then(|| ClassicalStage {
-            refiner: ClassicalRefiner::default(),
-            depth: plane(),
-            confidence: Array2::zeros((height, width)),
-        });
+        let uses_classical = runner.refine_uses_classical();
         let flow = || Flow::zeros(height, width);
         Ok(DearChain {
             runner,
             norm: bundle.normalisation(),
             options,
-            aligner: StaticAligner::new(height, width),
+            front: FrontEnd {
+                aligner: StaticAligner::new(height, width),
+                scratch: Vec::with_capacity(height * width),
+                amplitude: plane(),
+                flow_rough: flow(),
+                depth_rgb: plane(),
+                flow_convt: flow(),
+                flow_refined: flow(),
+                classical: uses_classical.then(ClassicalRefiner::default),
+                staged: Staged::new(height, width, uses_classical),
+            },
+            staged: Staged::new(height, width, uses_classical),
             edge_check: EdgeCheck::new(options.shift_search_px),
-            scratch: Vec::with_capacity(height * width),
-            rgb: [plane(), plane(), plane()],
-            amplitude: plane(),
-            flow_rough: flow(),
-            depth_rgb: plane(),
-            flow_convt: flow(),
-            flow_refined: flow(),
-            depth_warped: plane(),
-            amplitude_warped: plane(),
             refined: plane(),
-            classical,
             fallback: None,
+            prepared_count: 0,
         })
     }
 
@@ -320,7 +379,8 @@ impl DearChain {
         &mut self.runner
     }
 
-    /// Processes one frame and writes the aligned refined depth and its confidence.
+    /// Processes one frame and writes the aligned refined depth and its confidence:
+    /// [`prepare`](Self::prepare), then [`finish`](Self::finish).
     ///
     /// # Errors
     /// [`ChainError::Shape`] when an image does not have the chain's shape (nothing is
@@ -331,20 +391,230 @@ impl DearChain {
         mode: ChainMode,
         output: ChainOutput<'_>,
     ) -> Result<ChainReport, ChainError> {
-        self.check_shapes(&input, &output)?;
+        self.check_output_shape(&output)?;
+        let prepared = self.prepare(input, mode)?;
+        self.finish(prepared, input.rgb, output)
+    }
+
+    /// The first half of a frame: preprocessing, the alignment `mode` asks for, the warps of
+    /// the refinement's inputs and (for `hybrid` refiners) the classical filter on them.
+    ///
+    /// # Errors
+    /// [`ChainError::Shape`] when an input does not have the chain's shape,
+    /// [`ChainError::Model`] when a network fails.
+    pub fn prepare(
+        &mut self,
+        input: ChainInput<'_>,
+        mode: ChainMode,
+    ) -> Result<Prepared, ChainError> {
+        input.check_shape(self.dim())?;
+        self.prepared_count += 1;
+        let prepared = self.front.prepare(
+            Some(&mut self.runner),
+            self.norm,
+            &self.options,
+            input,
+            mode,
+            self.prepared_count,
+        )?;
+        std::mem::swap(&mut self.front.staged, &mut self.staged);
+        Ok(prepared)
+    }
+
+    /// The second half of the frame `prepared` describes (the latest one prepared): the refine
+    /// graph beside the edge alignment check, the output guard, and the published depth and
+    /// confidence. `rgb` is that frame's RGB image.
+    ///
+    /// # Errors
+    /// [`ChainError::Shape`] when `rgb` or an output does not have the chain's shape,
+    /// [`ChainError::Model`] when the refine graph fails.
+    ///
+    /// # Panics
+    /// If `prepared` is not the latest frame this chain prepared.
+    pub fn finish(
+        &mut self,
+        prepared: Prepared,
+        rgb: ArrayView3<'_, u8>,
+        output: ChainOutput<'_>,
+    ) -> Result<ChainReport, ChainError> {
+        self.check_output_shape(&output)?;
+        shape_check("rgb", rgb.shape(), &[self.dim().0, self.dim().1, 3])?;
+        assert_eq!(
+            prepared.id, self.prepared_count,
+            "DearChain::finish: only the latest prepared frame can be finished"
+        );
+        let mut back = BackEnd {
+            runner: &mut self.runner,
+            options: &self.options,
+            staged: &self.staged,
+            edge_check: &mut self.edge_check,
+            refined: &mut self.refined,
+            fallback: &mut self.fallback,
+        };
+        back.finish(prepared, rgb, output)
+    }
+
+    /// [`finish`](Self::finish) of `prepared` beside [`prepare`](Self::prepare) of `next`: the
+    /// refine graph runs on one thread, and the next frame's alignment, warps and classical
+    /// filter take the other core meanwhile. The results are those of the two calls in turn
+    /// (which is what runs when preparing `next` needs a network: the graphs are busy).
+    ///
+    /// # Errors
+    /// Each half's, as [`finish`](Self::finish) and [`prepare`](Self::prepare) say.
+    ///
+    /// # Panics
+    /// As [`finish`](Self::finish).
+    pub fn finish_and_prepare(
+        &mut self,
+        prepared: Prepared,
+        rgb: ArrayView3<'_, u8>,
+        output: ChainOutput<'_>,
+        next: ChainInput<'_>,
+        next_mode: ChainMode,
+    ) -> (
+        Result<ChainReport, ChainError>,
+        Result<Prepared, ChainError>,
+    ) {
+        if prepare_runs_network(next_mode, &self.options) {
+            let finished = self.finish(prepared, rgb, output);
+            return (finished, self.prepare(next, next_mode));
+        }
+        let checked = self
+            .check_output_shape(&output)
+            .and_then(|()| shape_check("rgb", rgb.shape(), &[self.dim().0, self.dim().1, 3]));
+        if let Err(e) = checked {
+            return (Err(e), self.prepare(next, next_mode));
+        }
+        if let Err(e) = next.check_shape(self.dim()) {
+            return (self.finish(prepared, rgb, output), Err(e));
+        }
+        assert_eq!(
+            prepared.id, self.prepared_count,
+            "DearChain::finish_and_prepare: only the latest prepared frame can be finished"
+        );
+        let next_id = self.prepared_count + 1;
+        let mut back = BackEnd {
+            runner: &mut self.runner,
+            options: &self.options,
+            staged: &self.staged,
+            edge_check: &mut self.edge_check,
+            refined: &mut self.refined,
+            fallback: &mut self.fallback,
+        };
+        let (front, norm, options) = (&mut self.front, self.norm, &self.options);
+        let (finished, next_prepared) = rayon::join(
+            || back.finish(prepared, rgb, output),
+            || front.prepare(None, norm, options, next, next_mode, next_id),
+        );
+        self.prepared_count = next_id;
+        if next_prepared.is_ok() {
+            std::mem::swap(&mut self.front.staged, &mut self.staged);
+        }
+        (finished, next_prepared)
+    }
+
+    /// The calibration measurement of a `Full` frame alone — preprocessing, the rough-flow
+    /// network, its robust least-squares fit and (by default) the direct fit to the frame's
+    /// edges — without aligning or refining anything. This is what a background worker runs
+    /// so that network frames never hold up the frame path (`DearChain::process` in `Cached`
+    /// mode does the rest); the measurement is the one [`ChainReport::measurement`] would carry.
+    ///
+    /// # Errors
+    /// As [`process`](Self::process) (no output is written, so only the inputs are checked).
+    pub fn measure(&mut self, input: ChainInput<'_>) -> Result<MeasureReport, ChainError> {
+        input.check_shape(self.dim())?;
+        let mut t = StageTimings::default();
+        let mut clock = Stopwatch::start();
+        let front = &mut self.front;
+        front.preprocess(self.norm, input, &mut t, &mut clock);
+        let NetworkFit { fit, direct } =
+            front.network_fit(&mut self.runner, &self.options, input, &mut t, &mut clock)?;
+        clock.lap(&mut t.calibrate);
+        let ran_direct_fit = direct.is_some();
+        let measurement = match direct.flatten() {
+            Some(direct) => Ok(direct),
+            None => fit,
+        };
+        Ok(MeasureReport {
+            measurement,
+            ran_direct_fit,
+            timings: t,
+        })
+    }
+
+    fn check_output_shape(&self, output: &ChainOutput<'_>) -> Result<(), ChainError> {
+        let (h, w) = self.dim();
+        shape_check("output depth", output.depth.shape(), &[h, w])?;
+        shape_check("output confidence", output.confidence.shape(), &[h, w])
+    }
+
+    /// RGB planes in `[0, 1]` of the last prepared frame.
+    pub fn rgb_planes(&self) -> &[Array2<f32>; 3] {
+        &self.staged.rgb
+    }
+    /// Normalised amplitude of the last frame (ToF grid).
+    pub fn amplitude(&self) -> &Array2<f32> {
+        &self.front.amplitude
+    }
+    /// `W_rough` of the last `Full` frame.
+    pub fn flow_rough(&self) -> &Flow {
+        &self.front.flow_rough
+    }
+    /// `D_rgb`: ToF depth warped by `W_rough` (`Full`) or aligned by the calibration (`Cached`).
+    pub fn depth_rgb(&self) -> &Array2<f32> {
+        &self.front.depth_rgb
+    }
+    /// `W_convt` of the last frame.
+    pub fn flow_convt(&self) -> &Flow {
+        &self.front.flow_convt
+    }
+    /// The flow the depth was finally warped with (`W_refn`, or `W_convt` when fusion was
+    /// skipped).
+    pub fn flow_refined(&self) -> &Flow {
+        &self.front.flow_refined
+    }
+    /// The refinement's depth input (metres) of the last prepared frame.
+    pub fn depth_warped(&self) -> &Array2<f32> {
+        &self.staged.depth_warped
+    }
+    /// The refinement's amplitude input of the last prepared frame.
+    pub fn amplitude_warped(&self) -> &Array2<f32> {
+        &self.staged.amplitude_warped
+    }
+    /// The refinement's raw output (metres), before masking, of the last finished frame.
+    pub fn refined_raw(&self) -> &Array2<f32> {
+        &self.refined
+    }
+}
+
+impl FrontEnd {
+    /// The first half of a frame (see [`DearChain::prepare`]) into `self.staged`. `runner` is
+    /// `None` only where `mode` runs no network ([`prepare_runs_network`]).
+    fn prepare(
+        &mut self,
+        runner: Option<&mut BundleRunner>,
+        norm: Normalisation,
+        options: &ChainOptions,
+        input: ChainInput<'_>,
+        mode: ChainMode,
+        id: u64,
+    ) -> Result<Prepared, ChainError> {
         let mut t = StageTimings::default();
         let mut clock = Stopwatch::start();
 
         // 1. Preprocess.
-        let amplitude_scale = self.preprocess(input, &mut t, &mut clock);
+        let amplitude_scale = self.preprocess(norm, input, &mut t, &mut clock);
 
         let mut measurement = None;
         let calibration;
         let ran_fusion;
         let mut ran_direct_fit = false;
+        let needs_runner = "the caller passes the runner when the mode runs a network";
         match mode {
             ChainMode::Full => {
-                let NetworkFit { fit, direct } = self.network_fit(input, &mut t, &mut clock)?;
+                let runner = runner.expect(needs_runner);
+                let NetworkFit { fit, direct } =
+                    self.network_fit(runner, options, input, &mut t, &mut clock)?;
                 ran_direct_fit = direct.is_some();
                 let direct = direct.flatten();
                 if let Some(direct) = direct {
@@ -352,6 +622,8 @@ impl DearChain {
                     calibration = Some(direct.calibration);
                     measurement = Some(Ok(direct));
                     ran_fusion = self.align_with_calibration(
+                        Some(runner),
+                        options,
                         input.depth,
                         &direct.calibration,
                         &mut t,
@@ -367,8 +639,7 @@ impl DearChain {
                     measurement = Some(fit);
                     clock.lap(&mut t.calibrate);
                     // 6. Fusion.
-                    self.runner
-                        .fuse(&self.flow_rough, &self.flow_convt, &mut self.flow_refined)?;
+                    runner.fuse(&self.flow_rough, &self.flow_convt, &mut self.flow_refined)?;
                     ran_fusion = true;
                     clock.lap(&mut t.fuse);
                     // 7. Warp depth and amplitude.
@@ -378,141 +649,38 @@ impl DearChain {
             }
             ChainMode::Cached(c) => {
                 calibration = Some(c);
-                ran_fusion = self.align_with_calibration(input.depth, &c, &mut t, &mut clock)?;
+                ran_fusion = self.align_with_calibration(
+                    runner,
+                    options,
+                    input.depth,
+                    &c,
+                    &mut t,
+                    &mut clock,
+                )?;
             }
         }
 
-        // 8. Refinement, beside the edge alignment check: the check reads only the warped
-        // inputs, and the refine graph runs on one thread, so the check takes the other core
-        // instead of adding its time after the refinement.
-        let [r, g, b] = &self.rgb;
-        let rgb = self
-            .runner
-            .refine_uses_rgb()
-            .then(|| [r.view(), g.view(), b.view()]);
-        let (runner, classical_stage, refined) =
-            (&mut self.runner, &mut self.classical, &mut self.refined);
-        let (depth_warped, amplitude_warped) = (&self.depth_warped, &self.amplitude_warped);
-        let edge_check = &mut self.edge_check;
-        let check = self.options.alignment_check;
-        let (refine_result, alignment) = rayon::join(
-            || {
-                let classical = match classical_stage {
-                    Some(stage) => {
-                        stage.refiner.refine_into(
-                            depth_warped.view(),
-                            input.rgb,
-                            stage.depth.view_mut(),
-                            stage.confidence.view_mut(),
-                        );
-                        Some(stage.depth.view())
-                    }
-                    None => None,
-                };
-                runner.refine(
-                    amplitude_warped.view(),
-                    depth_warped.view(),
-                    rgb,
-                    classical,
-                    refined.view_mut(),
-                )
-            },
-            || {
-                check
-                    .then(|| {
-                        edge_check.measure(input.rgb, amplitude_warped.view(), depth_warped.view())
-                    })
-                    .flatten()
-            },
-        );
-        refine_result?;
-        let ChainOutput {
-            depth: mut out_depth,
-            confidence: mut out_confidence,
-        } = output;
-        // The guard's pass counts the measured pixels too (`valid_fraction`).
-        let (valid, rejected_refinement) = match self.options.output_guard {
-            Some(guard) => {
-                let check = guard.check(self.depth_warped.view(), self.refined.view());
-                (check.measured, guard.rejects(&check).then_some(check))
-            }
-            None => {
-                let valid = self.depth_warped.iter().filter(|&&z| is_valid_depth(z));
-                (valid.count(), None)
-            }
-        };
-        match (rejected_refinement, &self.classical) {
-            (None, _) => {
-                Zip::from(&mut out_depth)
-                    .and(&self.refined)
-                    .and(&self.depth_warped)
-                    .for_each(|o, &r, &z| {
-                        *o = if is_valid_depth(z) && is_valid_depth(r) {
-                            r
-                        } else {
-                            0.0
-                        };
-                    });
-                confidence_into(
-                    self.depth_warped.view(),
-                    self.refined.view(),
-                    out_confidence,
-                );
-            }
-            // A hybrid refiner's classical stage already filtered this frame.
-            (Some(_), Some(stage)) => {
-                out_depth.assign(&stage.depth);
-                out_confidence.assign(&stage.confidence);
-            }
-            (Some(_), None) => self
-                .fallback
-                .get_or_insert_with(ClassicalRefiner::default)
-                .refine_into(
-                    self.depth_warped.view(),
-                    input.rgb,
-                    out_depth.view_mut(),
-                    out_confidence.view_mut(),
-                ),
+        // 8a. A hybrid refiner's classical filter (an input of its graph), counted as
+        // refinement.
+        if let (Some(refiner), Some((depth, confidence))) =
+            (&mut self.classical, &mut self.staged.classical)
+        {
+            refiner.refine_into(
+                self.staged.depth_warped.view(),
+                input.rgb,
+                depth.view_mut(),
+                confidence.view_mut(),
+            );
         }
         clock.lap(&mut t.refine);
-        let (h, w) = self.dim();
-        Ok(ChainReport {
+        Ok(Prepared {
+            id,
             ran_flow_network: matches!(mode, ChainMode::Full),
             ran_direct_fit,
             ran_fusion_network: ran_fusion,
             calibration,
             measurement,
-            valid_fraction: valid as f32 / (h * w) as f32,
             amplitude_scale,
-            alignment,
-            rejected_refinement,
-            timings: t,
-        })
-    }
-
-    /// The calibration measurement of a `Full` frame alone — preprocessing, the rough-flow
-    /// network, its robust least-squares fit and (by default) the direct fit to the frame's
-    /// edges — without aligning or refining anything. This is what a background worker runs
-    /// so that network frames never hold up the frame path (`DearChain::process` in `Cached`
-    /// mode does the rest); the measurement is the one [`ChainReport::measurement`] would carry.
-    ///
-    /// # Errors
-    /// As [`process`](Self::process) (no output is written, so only the inputs are checked).
-    pub fn measure(&mut self, input: ChainInput<'_>) -> Result<MeasureReport, ChainError> {
-        input.check_shape(self.dim())?;
-        let mut t = StageTimings::default();
-        let mut clock = Stopwatch::start();
-        self.preprocess(input, &mut t, &mut clock);
-        let NetworkFit { fit, direct } = self.network_fit(input, &mut t, &mut clock)?;
-        clock.lap(&mut t.calibrate);
-        let ran_direct_fit = direct.is_some();
-        let measurement = match direct.flatten() {
-            Some(direct) => Ok(direct),
-            None => fit,
-        };
-        Ok(MeasureReport {
-            measurement,
-            ran_direct_fit,
             timings: t,
         })
     }
@@ -520,15 +688,16 @@ impl DearChain {
     /// Step 1: the RGB planes and the normalised amplitude. Returns the amplitude scale.
     fn preprocess(
         &mut self,
+        norm: Normalisation,
         input: ChainInput<'_>,
         t: &mut StageTimings,
         clock: &mut Stopwatch,
     ) -> Option<f32> {
-        rgb_planes_into(input.rgb, &mut self.rgb);
+        rgb_planes_into(input.rgb, &mut self.staged.rgb);
         let scale = normalize_amplitude_into(
             input.amplitude,
             input.depth,
-            self.norm.amplitude_percentile,
+            norm.amplitude_percentile,
             &mut self.scratch,
             self.amplitude.view_mut(),
         );
@@ -541,13 +710,15 @@ impl DearChain {
     /// fit succeeded). Leaves `W_rough` and `D_rgb` in their buffers.
     fn network_fit(
         &mut self,
+        runner: &mut BundleRunner,
+        options: &ChainOptions,
         input: ChainInput<'_>,
         t: &mut StageTimings,
         clock: &mut Stopwatch,
     ) -> Result<NetworkFit, ChainError> {
         // 2. Rough flow.
-        let [r, g, b] = &self.rgb;
-        self.runner.flow(
+        let [r, g, b] = &self.staged.rgb;
+        runner.flow(
             [r.view(), g.view(), b.view()],
             self.amplitude.view(),
             &mut self.flow_rough,
@@ -558,11 +729,11 @@ impl DearChain {
         let fit = Measurement::from_flow(
             &self.flow_rough,
             self.depth_rgb.view(),
-            self.options.robust,
-            self.options.inlier_threshold_px,
+            options.robust,
+            options.inlier_threshold_px,
         );
         // The direct fit to the frame's edges, started from the network's calibration.
-        let direct = match (&self.options.direct_fit, &fit) {
+        let direct = match (&options.direct_fit, &fit) {
             (Some(params), Ok(network)) => {
                 Some(Measurement::from_direct_fit(&estimate_calibration_direct(
                     input.rgb,
@@ -583,6 +754,8 @@ impl DearChain {
     /// refiner's inputs. Returns whether the fusion network ran.
     fn align_with_calibration(
         &mut self,
+        runner: Option<&mut BundleRunner>,
+        options: &ChainOptions,
         depth: ArrayView2<'_, f32>,
         calibration: &Calibration,
         t: &mut StageTimings,
@@ -593,15 +766,15 @@ impl DearChain {
         self.flow_convt.u.assign(&self.aligner.flow().u);
         self.flow_convt.v.assign(&self.aligner.flow().v);
         clock.lap(&mut t.calibrate);
-        let ran_fusion = match self.options.cached_fusion {
+        let ran_fusion = match options.cached_fusion {
             CachedFusion::Skip => {
                 self.flow_refined.u.assign(&self.flow_convt.u);
                 self.flow_refined.v.assign(&self.flow_convt.v);
                 false
             }
             CachedFusion::Run => {
-                self.runner
-                    .fuse(&self.flow_convt, &self.flow_convt, &mut self.flow_refined)?;
+                let runner = runner.expect("the caller passes the runner when fusion runs");
+                runner.fuse(&self.flow_convt, &self.flow_convt, &mut self.flow_refined)?;
                 clock.lap(&mut t.fuse);
                 true
             }
@@ -613,62 +786,128 @@ impl DearChain {
 
     /// Warps the refiner's inputs, depth and normalised amplitude, with `W_refn`.
     fn warp_inputs(&mut self, depth: ArrayView2<'_, f32>) {
-        warp_depth(depth, &self.flow_refined, self.depth_warped.view_mut());
-        warp_bilinear(
+        warp_depth_and_bilinear(
+            depth,
             self.amplitude.view(),
             &self.flow_refined,
-            self.amplitude_warped.view_mut(),
-            None,
+            self.staged.depth_warped.view_mut(),
+            self.staged.amplitude_warped.view_mut(),
         );
     }
+}
 
-    fn check_shapes(
-        &self,
-        input: &ChainInput<'_>,
-        output: &ChainOutput<'_>,
-    ) -> Result<(), ChainError> {
-        let (h, w) = self.dim();
-        input.check_shape((h, w))?;
-        shape_check("output depth", output.depth.shape(), &[h, w])?;
-        shape_check("output confidence", output.confidence.shape(), &[h, w])
-    }
+/// The second half's state, borrowed from the chain beside a [`FrontEnd`] at work.
+struct BackEnd<'a> {
+    runner: &'a mut BundleRunner,
+    options: &'a ChainOptions,
+    staged: &'a Staged,
+    edge_check: &'a mut EdgeCheck,
+    refined: &'a mut Array2<f32>,
+    fallback: &'a mut Option<ClassicalRefiner>,
+}
 
-    /// RGB planes in `[0, 1]` of the last frame.
-    pub fn rgb_planes(&self) -> &[Array2<f32>; 3] {
-        &self.rgb
-    }
-    /// Normalised amplitude of the last frame (ToF grid).
-    pub fn amplitude(&self) -> &Array2<f32> {
-        &self.amplitude
-    }
-    /// `W_rough` of the last `Full` frame.
-    pub fn flow_rough(&self) -> &Flow {
-        &self.flow_rough
-    }
-    /// `D_rgb`: ToF depth warped by `W_rough` (`Full`) or aligned by the calibration (`Cached`).
-    pub fn depth_rgb(&self) -> &Array2<f32> {
-        &self.depth_rgb
-    }
-    /// `W_convt` of the last frame.
-    pub fn flow_convt(&self) -> &Flow {
-        &self.flow_convt
-    }
-    /// The flow the depth was finally warped with (`W_refn`, or `W_convt` when fusion was
-    /// skipped).
-    pub fn flow_refined(&self) -> &Flow {
-        &self.flow_refined
-    }
-    /// The refinement's depth input (metres).
-    pub fn depth_warped(&self) -> &Array2<f32> {
-        &self.depth_warped
-    }
-    /// The refinement's amplitude input.
-    pub fn amplitude_warped(&self) -> &Array2<f32> {
-        &self.amplitude_warped
-    }
-    /// The refinement's raw output (metres), before masking.
-    pub fn refined_raw(&self) -> &Array2<f32> {
-        &self.refined
+impl BackEnd<'_> {
+    /// The second half of a frame (see [`DearChain::finish`]); shapes are checked.
+    fn finish(
+        &mut self,
+        prepared: Prepared,
+        rgb_u8: ArrayView3<'_, u8>,
+        output: ChainOutput<'_>,
+    ) -> Result<ChainReport, ChainError> {
+        let mut t = prepared.timings;
+        let classical_time = t.refine;
+        let mut clock = Stopwatch::start();
+        let staged = self.staged;
+        // 8b. Refinement, beside the edge alignment check: the check reads only the warped
+        // inputs, and the refine graph runs on one thread, so the check takes the other core
+        // instead of adding its time after the refinement.
+        let [r, g, b] = &staged.rgb;
+        let rgb = self
+            .runner
+            .refine_uses_rgb()
+            .then(|| [r.view(), g.view(), b.view()]);
+        let (runner, refined) = (&mut *self.runner, &mut *self.refined);
+        let (depth_warped, amplitude_warped) = (&staged.depth_warped, &staged.amplitude_warped);
+        let edge_check = &mut *self.edge_check;
+        let check = self.options.alignment_check;
+        let (refine_result, alignment) = rayon::join(
+            || {
+                runner.refine(
+                    amplitude_warped.view(),
+                    depth_warped.view(),
+                    rgb,
+                    staged.classical.as_ref().map(|(depth, _)| depth.view()),
+                    refined.view_mut(),
+                )
+            },
+            || {
+                check
+                    .then(|| {
+                        edge_check.measure(rgb_u8, amplitude_warped.view(), depth_warped.view())
+                    })
+                    .flatten()
+            },
+        );
+        refine_result?;
+        let ChainOutput {
+            depth: mut out_depth,
+            confidence: mut out_confidence,
+        } = output;
+        // The guard's pass counts the measured pixels too (`valid_fraction`).
+        let (valid, rejected_refinement) = match self.options.output_guard {
+            Some(guard) => {
+                let check = guard.check(depth_warped.view(), self.refined.view());
+                (check.measured, guard.rejects(&check).then_some(check))
+            }
+            None => {
+                let valid = depth_warped.iter().filter(|&&z| is_valid_depth(z));
+                (valid.count(), None)
+            }
+        };
+        match (rejected_refinement, &staged.classical) {
+            (None, _) => {
+                Zip::from(&mut out_depth)
+                    .and(&*self.refined)
+                    .and(depth_warped)
+                    .for_each(|o, &r, &z| {
+                        *o = if is_valid_depth(z) && is_valid_depth(r) {
+                            r
+                        } else {
+                            0.0
+                        };
+                    });
+                confidence_into(depth_warped.view(), self.refined.view(), out_confidence);
+            }
+            // A hybrid refiner's classical stage already filtered this frame.
+            (Some(_), Some((depth, confidence))) => {
+                out_depth.assign(depth);
+                out_confidence.assign(confidence);
+            }
+            (Some(_), None) => self
+                .fallback
+                .get_or_insert_with(ClassicalRefiner::default)
+                .refine_into(
+                    depth_warped.view(),
+                    rgb_u8,
+                    out_depth.view_mut(),
+                    out_confidence.view_mut(),
+                ),
+        }
+        clock.lap(&mut t.refine);
+        t.refine += classical_time;
+        let (h, w) = depth_warped.dim();
+        Ok(ChainReport {
+            ran_flow_network: prepared.ran_flow_network,
+            ran_direct_fit: prepared.ran_direct_fit,
+            ran_fusion_network: prepared.ran_fusion_network,
+            calibration: prepared.calibration,
+            measurement: prepared.measurement,
+            valid_fraction: valid as f32 / (h * w) as f32,
+            amplitude_scale: prepared.amplitude_scale,
+            alignment,
+            rejected_refinement,
+            timings: t,
+        })
     }
 }
 

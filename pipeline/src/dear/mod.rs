@@ -3,7 +3,8 @@
 //! aligned refined depth and a confidence map into caller-provided views.
 //!
 //! - [`preprocess`]: amplitude and RGB normalisation as the bundle defines it;
-//! - [`chain`]: [`DearChain`], `Full` (the paper) and `Cached(calibration)` modes;
+//! - [`chain`]: [`DearChain`], `Full` (the paper) and `Cached(calibration)` modes, a frame in
+//!   two halves that consecutive frames can overlap;
 //! - [`background`]: [`BackgroundCalibrator`], a `Full` frame's calibration measurement on a
 //!   worker thread, so network frames do not stall the frame path;
 //! - [`confidence`]: the published per-pixel confidence and its definition;
@@ -19,6 +20,6 @@ pub mod preprocess;
 pub use background::{BackgroundCalibrator, Delivered, Submit};
 pub use chain::{
     CachedFusion, ChainError, ChainInput, ChainMode, ChainOptions, ChainOutput, ChainReport,
-    DearChain, MeasureReport, StageTimings,
+    DearChain, MeasureReport, Prepared, StageTimings,
 };
 pub use output_guard::{OutputGuard, RefinementCheck};

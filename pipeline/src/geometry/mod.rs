@@ -31,4 +31,4 @@ pub use splat::{
     splat_depth_into, splat_depth_with, synthesize_view, SplatScratch, SynthesizedView,
 };
 pub use surface::is_valid_depth;
-pub use warp::{warp_bilinear, warp_depth, warp_rgb};
+pub use warp::{warp_bilinear, warp_depth, warp_depth_and_bilinear, warp_rgb};

@@ -273,10 +273,25 @@ impl OnlineCalibrator {
         measurement: Option<Result<Measurement, LsqError>>,
         alignment: Option<EdgeAlignment>,
     ) -> Option<Outcome> {
+        self.end_frame_aligned_with(measurement, alignment, None)
+    }
+
+    /// [`end_frame`](Self::end_frame) of a frame that was aligned with `aligned_with` rather
+    /// than with the current estimate: a caller that overlaps frames aligns the next frame
+    /// before this one has ended, with the estimate as it was then. The edge check's shift
+    /// says where `c` is relative to the calibration that aligned the frame, so the tracking
+    /// moves the estimate towards `aligned_with`'s `c` plus that shift (with `None`, or the
+    /// estimate itself, this is the plain [`end_frame`](Self::end_frame)).
+    pub fn end_frame_aligned_with(
+        &mut self,
+        measurement: Option<Result<Measurement, LsqError>>,
+        alignment: Option<EdgeAlignment>,
+        aligned_with: Option<Calibration>,
+    ) -> Option<Outcome> {
         let residual = alignment.map(|a| a.disagreement);
         let outcome = measurement.map(|m| self.observe(m));
         if !self.this_frame_network {
-            self.track(alignment);
+            self.track(alignment, aligned_with);
         }
         if self.baseline_due && !self.this_frame_network {
             if let Some(r) = residual.filter(|r| r.is_finite()) {
@@ -363,7 +378,7 @@ impl OnlineCalibrator {
     }
 
     /// Moves `c` (estimate, accepted and held-back measurements) by the edge shift.
-    fn track(&mut self, alignment: Option<EdgeAlignment>) {
+    fn track(&mut self, alignment: Option<EdgeAlignment>, aligned_with: Option<Calibration>) {
         let Some(shift) = alignment.and_then(|a| a.shift) else {
             return;
         };
@@ -377,9 +392,13 @@ impl OnlineCalibrator {
         {
             return;
         }
+        // Where the edges put `c`, relative to the estimate.
+        let (lag_u, lag_v) = aligned_with.map_or((0.0, 0.0), |used| {
+            (estimate.cx - used.cx, estimate.cy - used.cy)
+        });
         let (mut du, mut dv) = (
-            shift.du * self.config.track_gain,
-            shift.dv * self.config.track_gain,
+            (shift.du - lag_u) * self.config.track_gain,
+            (shift.dv - lag_v) * self.config.track_gain,
         );
         let step = du.hypot(dv);
         if step > self.config.track_max_step_px {
@@ -972,6 +991,61 @@ mod tests {
         off.begin_frame();
         off.end_frame(None, shifted(1.0, 1.0, 0.5));
         assert_eq!(off.estimate(), Some(TRUE));
+    }
+
+    /// Overlapped frames: each frame is aligned with the estimate as it was before the previous
+    /// frame ended. Told which calibration aligned the frame, the tracker converges as without
+    /// the overlap; treating the late shift as relative to the current estimate (the plain
+    /// `end_frame`) counts the previous frame's step twice and rings.
+    #[test]
+    fn tracking_a_frame_aligned_one_frame_late_measures_from_its_own_calibration() {
+        let config = OnlineConfig {
+            interval_frames: 1000,
+            ..OnlineConfig::default()
+        };
+        // A 2 px step of c_x, then 12 overlapped frames.
+        let run = |aware: bool| {
+            let mut est = warmed_up(config);
+            let truth = Calibration {
+                cx: TRUE.cx + 2.0,
+                ..TRUE
+            };
+            let mut aligned_with = est.estimate().unwrap();
+            let mut errors = Vec::new();
+            for _ in 0..12 {
+                // The next frame is aligned now, before this one ends.
+                let next = est.estimate().unwrap();
+                let d = est.begin_frame();
+                assert_eq!(d.run_network, None);
+                let shift = shifted(truth.cx - aligned_with.cx, 0.0, 0.4);
+                if aware {
+                    est.end_frame_aligned_with(None, shift, Some(aligned_with));
+                } else {
+                    est.end_frame(None, shift);
+                }
+                aligned_with = next;
+                errors.push((est.estimate().unwrap().cx - truth.cx).abs());
+            }
+            errors
+        };
+        let aware = run(true);
+        let naive = run(false);
+        // Geometric convergence at the tracker's rate (0.3 per frame) from the 2 px step.
+        assert!(aware[11] < 1e-3, "{aware:?}");
+        assert!(
+            aware.windows(2).all(|w| w[1] <= w[0] + 1e-6),
+            "monotone: {aware:?}"
+        );
+        // The naive tracker overshoots (its error grows again after shrinking).
+        assert!(naive.windows(2).any(|w| w[1] > w[0] + 1e-3), "{naive:?}");
+        // Aligned with the estimate itself, it is the plain end_frame.
+        let mut a = warmed_up(config);
+        let mut b = warmed_up(config);
+        a.begin_frame();
+        b.begin_frame();
+        a.end_frame(None, shifted(0.7, -0.2, 0.4));
+        b.end_frame_aligned_with(None, shifted(0.7, -0.2, 0.4), b.estimate());
+        assert_eq!(a.estimate(), b.estimate());
     }
 
     /// The background protocol: a network frame handed to a worker is processed (and tracked)

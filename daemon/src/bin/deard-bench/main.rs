@@ -4,9 +4,15 @@
 //!
 //! For each calibration mode (`online`, the daemon's default, and `every-frame`, the paper) it
 //! replays a capture in order — looping until `--frames` frames were processed — after
-//! `--warmup` frames, and prints per-frame latency (median, p95, mean), the frames on which the
-//! rough-flow network ran, the median of each stage, and the resident memory after warm-up and
-//! at the end. `--json` writes the same figures for `scripts/results.py`.
+//! `--warmup` frames, and prints the processing time per frame (median, p95, mean), the frames
+//! on which the rough-flow network ran, the latency from a frame's first stage to its
+//! publication, the median of each stage, and the resident memory after warm-up and at the
+//! end. `--json` writes the same figures for `scripts/results.py`.
+//!
+//! As in `deard`, a frame that is waiting when the previous one reaches its refinement is
+//! prepared beside it (`Processor::finish_into`; online mode with the network in the
+//! background): back to back, every frame overlaps, so the time per frame is the throughput
+//! interval and the latency is longer than it. `--sequential` processes each frame whole.
 //!
 //! ```sh
 //! target/release/dear-synth sequence --frames 60 --width 640 --height 480 --seed 5 --out /tmp/vga
@@ -68,6 +74,9 @@ struct Cli {
     /// Also write the figures as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
+    /// Process each frame whole, never overlapping two (`Processor::process_into`).
+    #[arg(long)]
+    sequential: bool,
 }
 
 /// Median, p95 and mean of a set of milliseconds.
@@ -98,8 +107,13 @@ impl Summary {
 #[derive(Debug, Serialize)]
 struct ModeReport {
     mode: &'static str,
-    /// Every measured frame.
+    /// Every measured frame: the processor's time on it (for overlapped frames, the interval
+    /// between two publications).
     all: Summary,
+    /// From the start of a frame's first stage to its publication.
+    latency: Summary,
+    /// Measured frames prepared beside the previous one's refinement.
+    overlapped_frames: usize,
     /// Frames without the rough-flow network (online mode's steady state).
     without_network: Option<Summary>,
     /// Frames with it.
@@ -200,9 +214,12 @@ fn run(cli: &Cli) -> Result<(), String> {
             &mut processor,
             &frames,
             mode,
-            cli.warmup,
-            cli.frames,
-            period,
+            Schedule {
+                warmup: cli.warmup,
+                measured: cli.frames,
+                period,
+                sequential: cli.sequential,
+            },
         )?;
         print_report(&report);
         reports.push(report);
@@ -226,13 +243,20 @@ fn run(cli: &Cli) -> Result<(), String> {
     Ok(())
 }
 
+/// Which frames are offered when, and how they are processed.
+struct Schedule {
+    warmup: usize,
+    measured: usize,
+    /// Time between offered frames (`None`: back to back).
+    period: Option<std::time::Duration>,
+    sequential: bool,
+}
+
 fn measure(
     processor: &mut Processor,
     frames: &[RgbdFrame],
     mode: CalibrationMode,
-    warmup: usize,
-    measured: usize,
-    period: Option<std::time::Duration>,
+    schedule: Schedule,
 ) -> Result<ModeReport, String> {
     let (h, w) = frames[0].dim();
     let mut depth = Array2::<f32>::zeros((h, w));
@@ -245,36 +269,80 @@ fn measure(
         Stage::Warp,
         Stage::Refine,
     ];
-    let (mut with, mut without) = (Vec::new(), Vec::new());
+    let (mut with, mut without, mut latency) = (Vec::new(), Vec::new(), Vec::new());
     let mut stage_ms: Vec<Vec<f64>> = vec![Vec::new(); stages.len()];
     let mut rss_after_warmup = None;
-    let mut next_frame = Instant::now();
-    for i in 0..warmup + measured {
-        if let Some(period) = period {
-            let now = Instant::now();
-            if next_frame > now {
-                std::thread::sleep(next_frame - now);
-            }
-            next_frame = next_frame.max(now) + period;
+    let mut overlapped_frames = 0;
+    let total = schedule.warmup + schedule.measured;
+    let clock = Instant::now();
+    // When frame `i` is offered.
+    let offered = |i: usize| match schedule.period {
+        Some(period) => clock + period * i as u32,
+        None => clock,
+    };
+    let wait_for = |i: usize| {
+        let (now, at) = (Instant::now(), offered(i));
+        if at > now {
+            std::thread::sleep(at - now);
         }
-        if i == warmup {
+    };
+    let frame = |i: usize| &frames[i % frames.len()];
+    // The frame waiting for its second half: prepared, when its first half started, and the
+    // processor's time on it so far.
+    let mut pending = None;
+    for i in 0..total {
+        if i == schedule.warmup {
             rss_after_warmup = resident_mib();
         }
-        let frame = &frames[i % frames.len()];
-        let mut header = FrameHeader::new(frame.index, w as u32, h as u32);
+        let (prepared, started, spent) = match pending.take() {
+            Some(p) => p,
+            None => {
+                wait_for(i);
+                let start = Instant::now();
+                let p = if schedule.sequential {
+                    None
+                } else {
+                    Some(processor.prepare(frame(i)).map_err(|e| e.to_string())?)
+                };
+                (p, start, start.elapsed())
+            }
+        };
+        // The next frame overlaps this one when it is already there, as in deard.
+        let overlap = !schedule.sequential
+            && processor.overlaps_frames()
+            && i + 1 < total
+            && Instant::now() >= offered(i + 1);
+        let mut header = FrameHeader::new(frame(i).index, w as u32, h as u32);
         let out = FrameOutput {
             depth: depth.view_mut(),
             rgb: rgb.view_mut(),
             confidence: confidence.view_mut(),
         };
-        let start = Instant::now();
-        processor
-            .process_into(frame, &mut header, out)
-            .map_err(|e| e.to_string())?;
-        let ms = start.elapsed().as_secs_f64() * 1e3;
-        if i < warmup {
+        let t = Instant::now();
+        let next_started = Instant::now();
+        let finished = match prepared {
+            None => processor
+                .process_into(frame(i), &mut header, out)
+                .map(|()| None),
+            Some(prepared) => {
+                let next = overlap.then(|| frame(i + 1));
+                let finished = processor.finish_into(prepared, next, &mut header, out);
+                finished.result.and_then(|()| finished.next.transpose())
+            }
+        }
+        .map_err(|e| e.to_string())?;
+        let ms = (spent + t.elapsed()).as_secs_f64() * 1e3;
+        let frame_latency = started.elapsed().as_secs_f64() * 1e3;
+        if let Some(next) = finished {
+            if i + 1 >= schedule.warmup {
+                overlapped_frames += 1;
+            }
+            pending = Some((Some(next), next_started, std::time::Duration::ZERO));
+        }
+        if i < schedule.warmup {
             continue;
         }
+        latency.push(frame_latency);
         let network = header.flags & flags::CALIBRATION_ESTIMATED != 0;
         if network { &mut with } else { &mut without }.push(ms);
         // Stage breakdown of the frames that make the headline figure.
@@ -292,6 +360,8 @@ fn measure(
     Ok(ModeReport {
         mode: mode.name(),
         all: Summary::of(&all).expect("at least one measured frame"),
+        latency: Summary::of(&latency).expect("at least one measured frame"),
+        overlapped_frames,
         without_network: Summary::of(&without),
         with_network: Summary::of(&with),
         stage_median_ms: stages
@@ -314,6 +384,8 @@ fn print_report(r: &ModeReport) {
     };
     println!("{}:", r.mode);
     line("all frames", &Some(r.all));
+    line("latency (first stage to out)", &Some(r.latency));
+    println!("  overlapped frames: {}", r.overlapped_frames);
     line("without the flow network", &r.without_network);
     line("with the flow network", &r.with_network);
     let stages: Vec<String> = r
