@@ -28,7 +28,6 @@ use crate::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
 use crate::direct::{estimate_calibration_direct, DirectFitParams};
 use crate::filter::ClassicalRefiner;
 use crate::frame::Flow;
-use crate::geometry::surface::is_valid_depth;
 use crate::geometry::{warp_depth, warp_depth_and_bilinear, LsqError, RobustOptions};
 use crate::model::{BundleError, BundleRunner, ModelBundle, Normalisation, RunnerOptions};
 use crate::online::residual::{EdgeAlignment, EdgeCheck};
@@ -853,29 +852,23 @@ impl BackEnd<'_> {
             depth: mut out_depth,
             confidence: mut out_confidence,
         } = output;
-        // The guard's pass counts the measured pixels too (`valid_fraction`).
-        let (valid, rejected_refinement) = match self.options.output_guard {
-            Some(guard) => {
-                let check = guard.check(depth_warped.view(), self.refined.view());
-                (check.measured, guard.rejects(&check).then_some(check))
-            }
-            None => {
-                let valid = depth_warped.iter().filter(|&&z| is_valid_depth(z));
-                (valid.count(), None)
-            }
-        };
+        // The guard's pass writes the published depth and counts the measured pixels too
+        // (`valid_fraction`); a rejected frame's depth is overwritten below.
+        // (Without a guard the counts only give `valid_fraction`.)
+        let guard = self.options.output_guard.unwrap_or_default();
+        let check = guard.check_into(
+            depth_warped.view(),
+            self.refined.view(),
+            out_depth.view_mut(),
+        );
+        let valid = check.measured;
+        let rejected_refinement = self
+            .options
+            .output_guard
+            .is_some_and(|guard| guard.rejects(&check))
+            .then_some(check);
         match (rejected_refinement, &staged.classical) {
             (None, _) => {
-                Zip::from(&mut out_depth)
-                    .and(&*self.refined)
-                    .and(depth_warped)
-                    .for_each(|o, &r, &z| {
-                        *o = if is_valid_depth(z) && is_valid_depth(r) {
-                            r
-                        } else {
-                            0.0
-                        };
-                    });
                 confidence_into(depth_warped.view(), self.refined.view(), out_confidence);
             }
             // A hybrid refiner's classical stage already filtered this frame.

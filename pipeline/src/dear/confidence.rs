@@ -50,24 +50,32 @@ pub fn confidence_into(
     let warped = warped.as_slice().expect("standard layout is contiguous");
     let refined = refined.as_slice().expect("standard layout is contiguous");
     let row_of = |y: usize| (y * w, (y + 1) * w);
+    let support = || vec![0u8; w];
     match out.as_slice_mut() {
-        Some(o) => o.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            let (a, b) = row_of(y);
-            confidence_row(warped, &refined[a..b], w, y, |x, c| row[x] = c);
-        }),
+        Some(o) => o
+            .par_chunks_mut(w)
+            .enumerate()
+            .for_each_init(support, |support, (y, row)| {
+                let (a, b) = row_of(y);
+                confidence_row(warped, &refined[a..b], w, y, support, |x, c| row[x] = c);
+            }),
         None => Zip::indexed(out.axis_iter_mut(Axis(0))).par_for_each(|y, mut row| {
             let (a, b) = row_of(y);
-            confidence_row(warped, &refined[a..b], w, y, |x, c| row[x] = c);
+            let mut support = support();
+            confidence_row(warped, &refined[a..b], w, y, &mut support, |x, c| {
+                row[x] = c
+            });
         }),
     }
 }
 
 /// Confidence of row `y` (`warped` is the whole image, `refined` the row), passed to
-/// `put(column, value)`.
+/// `put(column, value)`; `support` is a row of scratch.
 ///
-/// The 3×3 support is counted without branches (`&`, not `&&`: depth edges and holes are
-/// irregular, and mispredictions dominated the 2-D indexed version), over the rows and columns
-/// that exist. `round` is done by truncation, which gives `f32::round`'s result for the
+/// The 3×3 support of the pixels with all nine neighbours is counted first, for the whole row
+/// in one branch-free loop ([`interior_support`], which the compiler vectorises), then each
+/// pixel's value is made (the border's support counted there, over the rows and columns that
+/// exist). `round` is done by truncation, which gives `f32::round`'s result for the
 /// non-negative values below 2²³ met here: without SSE4.1 (the default x86-64 target)
 /// `round` is a call per pixel.
 #[inline]
@@ -76,6 +84,7 @@ fn confidence_row(
     refined: &[f32],
     w: usize,
     y: usize,
+    support: &mut [u8],
     mut put: impl FnMut(usize, u8),
 ) {
     let h = warped.len() / w;
@@ -83,31 +92,30 @@ fn confidence_row(
     let centre = row(y);
     let above = (y > 0).then(|| row(y - 1));
     let below = (y + 1 < h).then(|| row(y + 1));
-    let valid = |q: f32| (q > 0.0) & q.is_finite();
+    let interior = match (above, below) {
+        (Some(a), Some(b)) if w >= 3 => {
+            interior_support(a, centre, b, &mut support[1..w - 1]);
+            1..w - 1
+        }
+        _ => 0..0,
+    };
     for (x, (&z, &r)) in centre.iter().zip(refined).enumerate() {
         if !is_valid_depth(z) || !is_valid_depth(r) {
             put(x, 0);
             continue;
         }
-        // `same_surface(z, q)` with the tolerance computed once.
         let tol = surface_tolerance(z);
-        let on = |q: f32| u32::from(valid(q) & ((q - z).abs() <= tol));
-        let support = match (above, below) {
-            // Inside the image: all nine neighbours exist.
-            (Some(a), Some(b)) if x > 0 && x + 1 < w => {
-                let sum3 = |r: &[f32]| on(r[x - 1]) + on(r[x]) + on(r[x + 1]);
-                sum3(a) + sum3(centre) + sum3(b)
-            }
-            _ => {
-                let (x0, x1) = (x.saturating_sub(1), (x + 1).min(w - 1));
-                let mut support = 0u32;
-                for r in [above, Some(centre), below].into_iter().flatten() {
-                    for &q in &r[x0..=x1] {
-                        support += on(q);
-                    }
+        let support = if interior.contains(&x) {
+            u32::from(support[x])
+        } else {
+            let (x0, x1) = (x.saturating_sub(1), (x + 1).min(w - 1));
+            let mut support = 0u32;
+            for r in [above, Some(centre), below].into_iter().flatten() {
+                for &q in &r[x0..=x1] {
+                    support += on_surface(z, tol, q);
                 }
-                support
             }
+            support
         };
         let agreement = (-(r - z).abs() / tol).exp();
         let c = 255.0 * support as f32 / 9.0 * agreement;
@@ -116,6 +124,40 @@ fn confidence_row(
         // At least 1: 0 is reserved for "no depth here", so a valid but barely supported depth
         // (e.g. a lone measured pixel the refinement moved far) must not read as invalid.
         put(x, rounded.clamp(1, 255) as u8);
+    }
+}
+
+/// 1 when `q` is a valid depth on the surface of `z` (tolerance `tol`), else 0: `same_surface`
+/// with the tolerance computed once, without short-circuits (depth edges and holes are
+/// irregular, and mispredicted branches dominated the 2-D indexed version).
+#[inline(always)]
+fn on_surface(z: f32, tol: f32, q: f32) -> u32 {
+    u32::from((q > 0.0) & q.is_finite() & ((q - z).abs() <= tol))
+}
+
+/// `r[..n]`, `r[1..n + 1]` and `r[2..n + 2]`.
+#[inline(always)]
+fn shifted(r: &[f32], n: usize) -> (&[f32], &[f32], &[f32]) {
+    let r = &r[..n + 2];
+    (&r[..n], &r[1..n + 1], &r[2..n + 2])
+}
+
+/// The 3×3 support of pixels `1..w−1` of the centre row (`out[i]` for column `i + 1`), from
+/// the rows above and below: every neighbour exists. Written over equal-length shifted slices
+/// so that the loop has no bounds checks and vectorises; an invalid centre gets a count that
+/// [`confidence_row`] does not use.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl", "x86_64+avx2"))]
+fn interior_support(above: &[f32], centre: &[f32], below: &[f32], out: &mut [u8]) {
+    let n = out.len();
+    let (a0, a1, a2) = shifted(above, n);
+    let (c0, c1, c2) = shifted(centre, n);
+    let (b0, b1, b2) = shifted(below, n);
+    for i in 0..n {
+        let z = c1[i];
+        let tol = surface_tolerance(z);
+        let on = |q: f32| on_surface(z, tol, q);
+        let count = on(a0[i]) + on(a1[i]) + on(a2[i]) + on(c0[i]) + on(c1[i]) + on(c2[i]);
+        out[i] = (count + on(b0[i]) + on(b1[i]) + on(b2[i])) as u8;
     }
 }
 
