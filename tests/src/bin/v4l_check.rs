@@ -7,7 +7,10 @@
 //!
 //! Receives `--count` frames and prints one line per frame (`frame <id> matches fed <k>` or
 //! the first differing pixel); exits 0 when every frame matched a fed frame, 1 when one did
-//! not, 3 when `--timeout-s` passed first.
+//! not, 3 when `--timeout-s` passed first. `--settle-frames N` tolerates up to N frames that
+//! match nothing *before* the first that matches (they are printed, not counted): right after
+//! vivid's nodes come back, its capture node delivers its own test pattern until the feeder's
+//! first buffer reaches it.
 
 use std::time::{Duration, Instant};
 
@@ -29,6 +32,9 @@ struct Args {
     count: usize,
     #[arg(long, default_value_t = 60.0)]
     timeout_s: f64,
+    /// Frames matching no fed frame tolerated before the first one that matches.
+    #[arg(long, default_value_t = 0)]
+    settle_frames: usize,
 }
 
 fn main() {
@@ -57,6 +63,8 @@ fn main() {
     let deadline = Instant::now() + Duration::from_secs_f64(args.timeout_s);
     let mut received = 0;
     let mut failed = false;
+    // Unmatched frames still tolerated: only until the first match.
+    let mut settling = args.settle_frames;
     while received < args.count {
         let Some(left) = deadline.checked_duration_since(Instant::now()) else {
             eprintln!(
@@ -73,9 +81,9 @@ fn main() {
                 std::process::exit(2);
             }
         };
-        received += 1;
         let id = frame.header().frame_id;
         if frame.size() != (args.width, args.height) {
+            received += 1;
             println!(
                 "frame {id}: size {:?}, fed {}x{}",
                 frame.size(),
@@ -90,8 +98,17 @@ fn main() {
             .iter()
             .position(|f| first_difference(f, depth).is_none())
         {
-            Some(k) => println!("frame {id} matches fed {k}"),
+            Some(k) => {
+                received += 1;
+                settling = 0;
+                println!("frame {id} matches fed {k}");
+            }
+            None if settling > 0 => {
+                settling -= 1;
+                println!("frame {id} matches no fed frame yet (settling, not counted)");
+            }
             None => {
+                received += 1;
                 // Report against the closest fed frame: the one with the fewest differences.
                 let (k, d) = fed
                     .iter()
