@@ -255,10 +255,34 @@ struct FrontEnd {
     depth_rgb: Array2<f32>,
     flow_convt: Flow,
     flow_refined: Flow,
+    /// Where the last frame's flows are: a frame aligned by a calibration reads `W_convt` (and
+    /// with fusion skipped `W_refn`) from the aligner instead of copying it (5 MB at 640×480).
+    flows: FlowSource,
     /// `hybrid` refiners: the classical refiner they build on.
     classical: Option<ClassicalRefiner>,
     /// The refinement's inputs being written by `prepare`.
     staged: Staged,
+}
+
+/// Where a frame's `W_convt` and final flow `W_refn` are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum FlowSource {
+    /// The paper's steps: `flow_convt` and the fused `flow_refined`.
+    Buffers,
+    /// Aligned by a calibration, fusion skipped: both are the aligner's flow.
+    Aligner,
+    /// Aligned by a calibration, fusion run: `W_convt` is the aligner's, `W_refn` fused.
+    AlignerFused,
+}
+
+impl FlowSource {
+    /// `W_refn`, given the fused-flow buffer and the aligner's flow.
+    fn refined<'a>(self, fused: &'a Flow, aligners: &'a Flow) -> &'a Flow {
+        match self {
+            FlowSource::Buffers | FlowSource::AlignerFused => fused,
+            FlowSource::Aligner => aligners,
+        }
+    }
 }
 
 /// What the second half reads of a prepared frame.
@@ -347,6 +371,7 @@ impl DearChain {
                 depth_rgb: plane(),
                 flow_convt: flow(),
                 flow_refined: flow(),
+                flows: FlowSource::Buffers,
                 classical: uses_classical.then(ClassicalRefiner::default),
                 staged: Staged::new(height, width, uses_classical),
             },
@@ -565,12 +590,12 @@ impl DearChain {
     }
     /// `W_convt` of the last frame.
     pub fn flow_convt(&self) -> &Flow {
-        &self.front.flow_convt
+        self.front.convt()
     }
     /// The flow the depth was finally warped with (`W_refn`, or `W_convt` when fusion was
     /// skipped).
     pub fn flow_refined(&self) -> &Flow {
-        &self.front.flow_refined
+        self.front.refined()
     }
     /// The refinement's depth input (metres) of the last prepared frame.
     pub fn depth_warped(&self) -> &Array2<f32> {
@@ -630,6 +655,7 @@ impl FrontEnd {
                     )?;
                 } else {
                     calibration = fit.as_ref().ok().map(|m| m.calibration);
+                    self.flows = FlowSource::Buffers;
                     self.flow_convt.u.assign(&self.flow_rough.u);
                     self.flow_convt.v.assign(&self.flow_rough.v);
                     if let Some(c) = calibration {
@@ -762,18 +788,17 @@ impl FrontEnd {
     ) -> Result<bool, ChainError> {
         self.aligner
             .align_into(depth, calibration, self.depth_rgb.view_mut());
-        self.flow_convt.u.assign(&self.aligner.flow().u);
-        self.flow_convt.v.assign(&self.aligner.flow().v);
         clock.lap(&mut t.calibrate);
         let ran_fusion = match options.cached_fusion {
             CachedFusion::Skip => {
-                self.flow_refined.u.assign(&self.flow_convt.u);
-                self.flow_refined.v.assign(&self.flow_convt.v);
+                self.flows = FlowSource::Aligner;
                 false
             }
             CachedFusion::Run => {
+                self.flows = FlowSource::AlignerFused;
                 let runner = runner.expect("the caller passes the runner when fusion runs");
-                runner.fuse(&self.flow_convt, &self.flow_convt, &mut self.flow_refined)?;
+                let convt = self.aligner.flow();
+                runner.fuse(convt, convt, &mut self.flow_refined)?;
                 clock.lap(&mut t.fuse);
                 true
             }
@@ -783,12 +808,26 @@ impl FrontEnd {
         Ok(ran_fusion)
     }
 
+    /// `W_convt` of the last frame.
+    fn convt(&self) -> &Flow {
+        match self.flows {
+            FlowSource::Buffers => &self.flow_convt,
+            FlowSource::Aligner | FlowSource::AlignerFused => self.aligner.flow(),
+        }
+    }
+
+    /// The flow the last frame was warped with.
+    fn refined(&self) -> &Flow {
+        self.flows.refined(&self.flow_refined, self.aligner.flow())
+    }
+
     /// Warps the refiner's inputs, depth and normalised amplitude, with `W_refn`.
     fn warp_inputs(&mut self, depth: ArrayView2<'_, f32>) {
+        let flow = self.flows.refined(&self.flow_refined, self.aligner.flow());
         warp_depth_and_bilinear(
             depth,
             self.amplitude.view(),
-            &self.flow_refined,
+            flow,
             self.staged.depth_warped.view_mut(),
             self.staged.amplitude_warped.view_mut(),
         );
