@@ -9,8 +9,9 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-#[test]
-fn deard_bench_reports_every_measured_frame() {
+/// Runs `deard-bench` on `samples/demo` with the smoke bundle and `args`; returns its
+/// standard output and its `--json` report (it must succeed).
+fn bench(args: &[&str]) -> (String, serde_json::Value) {
     let tmp = tempfile::tempdir().unwrap();
     let json = tmp.path().join("bench.json");
     let out = Command::new(env!("CARGO_BIN_EXE_deard-bench"))
@@ -20,31 +21,38 @@ fn deard_bench_reports_every_measured_frame() {
             "samples/demo",
             "--bundle",
             "fixtures/bundles/smoke-edge",
-            "--frames",
-            "5",
-            "--warmup",
-            "1",
-            "--mode",
-            "online",
-            "--mode",
-            "every-frame",
-            "--json",
         ])
+        .args(args)
+        .arg("--json")
         .arg(&json)
         .output()
         .expect("run deard-bench");
-    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(
         out.status.success(),
         "{stdout}{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    let report = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    (stdout, report)
+}
+
+#[test]
+fn deard_bench_reports_every_measured_frame() {
+    let (stdout, report) = bench(&[
+        "--frames",
+        "5",
+        "--warmup",
+        "1",
+        "--mode",
+        "online",
+        "--mode",
+        "every-frame",
+    ]);
     assert!(
         stdout.contains("online:") && stdout.contains("every-frame:"),
         "{stdout}"
     );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     assert_eq!(
         (report["width"].as_u64(), report["height"].as_u64()),
         (Some(320), Some(240))
@@ -92,35 +100,15 @@ fn deard_bench_reports_every_measured_frame() {
 
 #[test]
 fn deard_bench_sequential_never_overlaps_frames() {
-    let tmp = tempfile::tempdir().unwrap();
-    let json = tmp.path().join("bench.json");
-    let out = Command::new(env!("CARGO_BIN_EXE_deard-bench"))
-        .current_dir(root())
-        .args([
-            "--capture",
-            "samples/demo",
-            "--bundle",
-            "fixtures/bundles/smoke-edge",
-            "--frames",
-            "3",
-            "--warmup",
-            "1",
-            "--mode",
-            "online",
-            "--sequential",
-            "--json",
-        ])
-        .arg(&json)
-        .output()
-        .expect("run deard-bench");
-    assert!(
-        out.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let (_, report) = bench(&[
+        "--frames",
+        "3",
+        "--warmup",
+        "1",
+        "--mode",
+        "online",
+        "--sequential",
+    ]);
     let online = &report["modes"][0];
     assert_eq!(online["overlapped_frames"].as_u64(), Some(0), "{online}");
     assert_eq!(online["all"]["count"].as_u64(), Some(3), "{online}");

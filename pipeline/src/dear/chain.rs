@@ -461,20 +461,8 @@ impl DearChain {
         rgb: ArrayView3<'_, u8>,
         output: ChainOutput<'_>,
     ) -> Result<ChainReport, ChainError> {
-        self.check_output_shape(&output)?;
-        shape_check("rgb", rgb.shape(), &[self.dim().0, self.dim().1, 3])?;
-        assert_eq!(
-            prepared.id, self.prepared_count,
-            "DearChain::finish: only the latest prepared frame can be finished"
-        );
-        let mut back = BackEnd {
-            runner: &mut self.runner,
-            options: &self.options,
-            staged: &self.staged,
-            edge_check: &mut self.edge_check,
-            refined: &mut self.refined,
-            fallback: &mut self.fallback,
-        };
+        self.check_finish(&prepared, rgb, &output)?;
+        let (_, mut back, _) = self.halves();
         back.finish(prepared, rgb, output)
     }
 
@@ -503,29 +491,15 @@ impl DearChain {
             let finished = self.finish(prepared, rgb, output);
             return (finished, self.prepare(next, next_mode));
         }
-        let checked = self
-            .check_output_shape(&output)
-            .and_then(|()| shape_check("rgb", rgb.shape(), &[self.dim().0, self.dim().1, 3]));
-        if let Err(e) = checked {
+        if let Err(e) = self.check_finish(&prepared, rgb, &output) {
             return (Err(e), self.prepare(next, next_mode));
         }
         if let Err(e) = next.check_shape(self.dim()) {
             return (self.finish(prepared, rgb, output), Err(e));
         }
-        assert_eq!(
-            prepared.id, self.prepared_count,
-            "DearChain::finish_and_prepare: only the latest prepared frame can be finished"
-        );
         let next_id = self.prepared_count + 1;
-        let mut back = BackEnd {
-            runner: &mut self.runner,
-            options: &self.options,
-            staged: &self.staged,
-            edge_check: &mut self.edge_check,
-            refined: &mut self.refined,
-            fallback: &mut self.fallback,
-        };
-        let (front, norm, options) = (&mut self.front, self.norm, &self.options);
+        let (front, mut back, norm) = self.halves();
+        let options = back.options;
         let (finished, next_prepared) = rayon::join(
             || back.finish(prepared, rgb, output),
             || front.prepare(None, norm, options, next, next_mode, next_id),
@@ -564,6 +538,39 @@ impl DearChain {
             ran_direct_fit,
             timings: t,
         })
+    }
+
+    /// What [`finish`](Self::finish) checks before it starts.
+    ///
+    /// # Panics
+    /// If `prepared` is not the latest frame this chain prepared.
+    fn check_finish(
+        &self,
+        prepared: &Prepared,
+        rgb: ArrayView3<'_, u8>,
+        output: &ChainOutput<'_>,
+    ) -> Result<(), ChainError> {
+        self.check_output_shape(output)?;
+        shape_check("rgb", rgb.shape(), &[self.dim().0, self.dim().1, 3])?;
+        assert_eq!(
+            prepared.id, self.prepared_count,
+            "DearChain::finish: only the latest prepared frame can be finished"
+        );
+        Ok(())
+    }
+
+    /// The chain's two halves, borrowed apart so that they can run side by side, and the
+    /// bundle's normalisation.
+    fn halves(&mut self) -> (&mut FrontEnd, BackEnd<'_>, Normalisation) {
+        let back = BackEnd {
+            runner: &mut self.runner,
+            options: &self.options,
+            staged: &self.staged,
+            edge_check: &mut self.edge_check,
+            refined: &mut self.refined,
+            fallback: &mut self.fallback,
+        };
+        (&mut self.front, back, self.norm)
     }
 
     fn check_output_shape(&self, output: &ChainOutput<'_>) -> Result<(), ChainError> {

@@ -1,6 +1,6 @@
-//! `deard-bench`: the daemon's per-frame latency on this machine, measured on the code path
-//! `deard` runs (`deard::processing::Processor`, the same configuration keys), without the
-//! shared memory and the replay pacing around it.
+//! `deard-bench`: the daemon's time per frame and latency on this machine, measured on the
+//! code path `deard` runs (`deard::processing::Processor`, the same configuration keys),
+//! without the shared memory and the replay pacing around it.
 //!
 //! For each calibration mode (`online`, the daemon's default, and `every-frame`, the paper) it
 //! replays a capture in order — looping until `--frames` frames were processed — after
