@@ -467,3 +467,48 @@ fn the_background_worker_measures_what_a_full_frame_measures() {
     assert_eq!(worker.try_submit(input, 10).unwrap(), Submit::Started);
     assert_eq!(worker.wait().unwrap().ticket, 10);
 }
+
+/// The worker runs at the lowest scheduling priority (nice 19 for a caller at nice 0), so under
+/// load it takes what the frame path leaves (`background.rs` says what nice +10 cost).
+#[cfg(target_os = "linux")]
+#[test]
+fn the_background_worker_runs_at_the_lowest_priority() {
+    use dear_pipeline::dear::BackgroundCalibrator;
+    let p = Parity::load();
+    let chain = DearChain::new(&bundle(), p.w, p.h).unwrap();
+    let name = "nice-worker"; // within the 15 bytes a thread name keeps
+    let worker = BackgroundCalibrator::<u32>::spawn(chain, name).unwrap();
+    // A thread's nice value: field 19 of its `stat` (counted after the `(comm)` field).
+    let nice_in = |stat: &str| -> Option<i64> {
+        let after = &stat[stat.rfind(')')? + 2..];
+        after.split_whitespace().nth(16)?.parse().ok()
+    };
+    let nice_of = |comm: &str| -> Option<i64> {
+        std::fs::read_dir("/proc/self/task").ok()?.find_map(|task| {
+            let dir = task.ok()?.path();
+            let this = std::fs::read_to_string(dir.join("comm")).ok()?;
+            if this.trim() != comm {
+                return None;
+            }
+            nice_in(&std::fs::read_to_string(dir.join("stat")).ok()?)
+        })
+    };
+    let own = nice_in(&std::fs::read_to_string("/proc/thread-self/stat").unwrap())
+        .expect("the test thread's own nice value");
+    let expected = (own + 19).min(19);
+    // The worker lowers its priority as it starts: wait for it to show.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    let worker_nice = loop {
+        let nice = nice_of(name);
+        if nice == Some(expected) || std::time::Instant::now() > deadline {
+            break nice;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    };
+    assert_eq!(
+        worker_nice,
+        Some(expected),
+        "the worker's nice value (caller at {own})"
+    );
+    drop(worker);
+}
