@@ -1,0 +1,104 @@
+//! The processor's overlapped path (`Processor::prepare` / `finish_into`) with a real bundle and
+//! real frames: frames come out in order with the DEAR flags, and a bad frame offered as the
+//! next one is refused with an error naming it while the held frame is still published.
+
+use std::path::PathBuf;
+
+use dear_capture::{CaptureDir, RgbdFrame};
+use dear_proto::{flags, FrameHeader};
+use deard::config::{PipelineConfig, RefineMode};
+use deard::processing::{FrameOutput, ProcessError, Processor};
+use ndarray::{s, Array2, Array3};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+struct Planes {
+    depth: Array2<f32>,
+    rgb: Array3<u8>,
+    confidence: Array2<u8>,
+}
+
+impl Planes {
+    fn new(h: usize, w: usize) -> Self {
+        Planes {
+            depth: Array2::from_elem((h, w), f32::NAN),
+            rgb: Array3::zeros((h, w, 3)),
+            confidence: Array2::zeros((h, w)),
+        }
+    }
+
+    fn output(&mut self) -> FrameOutput<'_> {
+        FrameOutput {
+            depth: self.depth.view_mut(),
+            rgb: self.rgb.view_mut(),
+            confidence: self.confidence.view_mut(),
+        }
+    }
+}
+
+#[test]
+fn overlapped_frames_are_published_and_a_bad_next_frame_is_refused_by_name() {
+    let capture = CaptureDir::open(root().join("samples/demo")).unwrap();
+    let (w, h) = capture.size();
+    let config = PipelineConfig {
+        refine: RefineMode::Dear,
+        bundle: root().join("fixtures/bundles/smoke-edge"),
+        ..PipelineConfig::default()
+    };
+    let mut processor =
+        Processor::from_config(w, h, capture.manifest().initial_calibration, &config).unwrap();
+    // The daemon's default: online calibration with the network in the background.
+    assert!(processor.overlaps_frames());
+    let frames: Vec<RgbdFrame> = (0..3).map(|p| capture.read_frame(p).unwrap()).collect();
+    let (h, w) = (h as usize, w as usize);
+    // A frame of the wrong size (a row short), as a broken source could deliver.
+    let mut bad = frames[1].clone();
+    bad.index = 99;
+    bad.depth = bad.depth.slice(s![..h - 1, ..]).to_owned();
+    let want = flags::ALIGNED | flags::REFINED_NETWORK | flags::CALIBRATION_ONLINE;
+
+    let mut pending = processor.prepare(&frames[0]).unwrap();
+    for (k, next) in [&frames[1], &bad, &frames[2]].into_iter().enumerate() {
+        let mut planes = Planes::new(h, w);
+        let mut header = FrameHeader::new(pending.frame().index, w as u32, h as u32);
+        let finished = processor.finish_into(pending, Some(next), &mut header, planes.output());
+        finished.result.unwrap_or_else(|e| panic!("step {k}: {e}"));
+        assert_eq!(
+            header.flags & want,
+            want,
+            "step {k}: flags {:x}",
+            header.flags
+        );
+        assert!(
+            planes.depth.iter().all(|z| z.is_finite()),
+            "step {k}: depth written"
+        );
+        assert!(
+            planes.depth.iter().any(|&z| z > 0.0),
+            "step {k}: depth published"
+        );
+        assert_eq!(
+            planes.rgb, frames[header.frame_id as usize].rgb,
+            "step {k}: RGB"
+        );
+        pending = match finished.next.expect("a next frame was given") {
+            Ok(p) => p,
+            Err(ProcessError::Size { frame, .. }) => {
+                assert_eq!(frame, 99, "the error names the bad frame");
+                // Skipped: the stream goes on with the next good frame.
+                processor.prepare(&frames[2]).unwrap()
+            }
+            Err(e) => panic!("step {k}: unexpected {e}"),
+        };
+        assert_ne!(pending.frame().index, 99, "the bad frame is never held");
+    }
+    // The last held frame is finished on its own.
+    let mut planes = Planes::new(h, w);
+    let mut header = FrameHeader::new(pending.frame().index, w as u32, h as u32);
+    let finished = processor.finish_into(pending, None, &mut header, planes.output());
+    finished.result.unwrap();
+    assert!(finished.next.is_none());
+    assert_eq!(header.frame_id, 2);
+}
