@@ -354,7 +354,8 @@ impl Processor {
                 next: next.map(|n| self.prepare(n)),
             };
         };
-        let next_size = next.as_ref().map(|n| self.check_size(n.borrow()));
+        // A next frame of the wrong size is refused here; the held frame is finished alone.
+        let next = next.map(|n| self.check_size(n.borrow()).map(|()| n));
         out.rgb.assign(&frame.rgb);
         let Engine::Dear {
             chain,
@@ -378,8 +379,8 @@ impl Processor {
             confidence: out.confidence.view_mut(),
         };
         let next_calibration = online.estimate().unwrap_or(self.calibration);
-        let (finished, next_prepared) = match (next, next_size) {
-            (Some(n), Some(Ok(()))) => {
+        let (finished, next_prepared) = match next {
+            Some(Ok(n)) => {
                 let (finished, next_prepared) = chain.finish_and_prepare(
                     prepared,
                     input.rgb,
@@ -399,8 +400,8 @@ impl Processor {
                     });
                 (finished, Some(next_prepared))
             }
-            (Some(_), Some(Err(e))) => (chain.finish(prepared, input.rgb, output), Some(Err(e))),
-            _ => (chain.finish(prepared, input.rgb, output), None),
+            Some(Err(e)) => (chain.finish(prepared, input.rgb, output), Some(Err(e))),
+            None => (chain.finish(prepared, input.rgb, output), None),
         };
         let result = finished
             .map(|report| {

@@ -301,11 +301,16 @@ impl FramePath<'_> {
                 arrived: incoming.arrived,
             }),
             Err(reason) => {
-                self.stats.skipped += 1;
-                tracing::warn!(frame = index, %reason, "frame skipped");
+                self.skip(index, &reason);
                 None
             }
         }
+    }
+
+    /// Counts a frame that cannot be processed or published, and says why.
+    fn skip(&mut self, frame: u64, reason: &dyn std::fmt::Display) {
+        self.stats.skipped += 1;
+        tracing::warn!(frame, %reason, "frame skipped");
     }
 
     /// Finishes and publishes `waiting`, preparing `next` beside it; returns `next`, prepared.
@@ -332,10 +337,7 @@ impl FramePath<'_> {
                     *self.latest_estimate = Some(sent);
                 }
             }
-            Err(reason) => {
-                self.stats.skipped += 1;
-                tracing::warn!(frame = index, %reason, "frame skipped");
-            }
+            Err(reason) => self.skip(index, &reason),
         }
         let (header, arrived) = next_meta?;
         match (next_prepared, next_frame) {
@@ -345,8 +347,7 @@ impl FramePath<'_> {
                 arrived,
             }),
             (Some(Err(reason)), _) => {
-                self.stats.skipped += 1;
-                tracing::warn!(frame = header.frame_id, %reason, "frame skipped");
+                self.skip(header.frame_id, &reason);
                 None
             }
             // The sample was never filled (no loan): the next frame is prepared on its own.

@@ -276,6 +276,14 @@ enum FlowSource {
 }
 
 impl FlowSource {
+    /// `W_convt`, given its buffer and the aligner's flow.
+    fn convt<'a>(self, buffer: &'a Flow, aligners: &'a Flow) -> &'a Flow {
+        match self {
+            FlowSource::Buffers => buffer,
+            FlowSource::Aligner | FlowSource::AlignerFused => aligners,
+        }
+    }
+
     /// `W_refn`, given the fused-flow buffer and the aligner's flow.
     fn refined<'a>(self, fused: &'a Flow, aligners: &'a Flow) -> &'a Flow {
         match self {
@@ -817,10 +825,7 @@ impl FrontEnd {
 
     /// `W_convt` of the last frame.
     fn convt(&self) -> &Flow {
-        match self.flows {
-            FlowSource::Buffers => &self.flow_convt,
-            FlowSource::Aligner | FlowSource::AlignerFused => self.aligner.flow(),
-        }
+        self.flows.convt(&self.flow_convt, self.aligner.flow())
     }
 
     /// The flow the last frame was warped with.

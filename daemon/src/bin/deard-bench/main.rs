@@ -287,15 +287,16 @@ fn measure(
         }
     };
     let frame = |i: usize| &frames[i % frames.len()];
-    // The frame waiting for its second half: prepared, when its first half started, and the
-    // processor's time on it so far.
+    // The next frame, already prepared beside this one's refinement, and when that began.
     let mut pending = None;
     for i in 0..total {
         if i == schedule.warmup {
             rss_after_warmup = resident_mib();
         }
+        // This frame: prepared (`None` when processed whole), when its first half started, and
+        // the processor's time on it so far.
         let (prepared, started, spent) = match pending.take() {
-            Some(p) => p,
+            Some((p, started)) => (Some(p), started, std::time::Duration::ZERO),
             None => {
                 wait_for(i);
                 let start = Instant::now();
@@ -319,7 +320,6 @@ fn measure(
             confidence: confidence.view_mut(),
         };
         let t = Instant::now();
-        let next_started = Instant::now();
         let finished = match prepared {
             None => processor
                 .process_into(frame(i), &mut header, out)
@@ -337,7 +337,7 @@ fn measure(
             if i + 1 >= schedule.warmup {
                 overlapped_frames += 1;
             }
-            pending = Some((Some(next), next_started, std::time::Duration::ZERO));
+            pending = Some((next, t));
         }
         if i < schedule.warmup {
             continue;
