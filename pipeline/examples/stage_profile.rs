@@ -15,7 +15,8 @@
 //! them unchanged). `--tract-threads N` runs the refine graph on a pool of N threads (build with
 //! `--features multithread`; without it the option has no effect). `--dump DIR` writes every geometry
 //! stage's output for the frame as raw little-endian bytes (and the edge check's numbers as
-//! bit patterns), so an optimisation can be checked to leave them bit-identical with `cmp`.
+//! bit patterns), so an optimisation can be checked to leave them bit-identical with `cmp`;
+//! with `--full` also the classical filter's output and the refined depth.
 //! The dumped confidence is computed against the aligned (splatted) depth rather than the
 //! refine graph's output, so the dump depends only on the geometry code.
 
@@ -184,6 +185,12 @@ fn main() {
         write_f32(&dir, "align_flow_v.f32", &aligner.flow().v);
         write_f32(&dir, "warp_depth.f32", &dw);
         write_f32(&dir, "warp_amp.f32", &aw);
+        if runner.is_some() {
+            // With --full: the classical filter's output and the refiner's (graph and tail).
+            write_f32(&dir, "classical_depth.f32", &cd);
+            std::fs::write(dir.join("classical_conf.u8"), cc.as_slice().unwrap()).unwrap();
+            write_f32(&dir, "refined_depth.f32", &out);
+        }
         confidence_into(dw.view(), drgb.view(), conf.view_mut());
         std::fs::write(dir.join("confidence.u8"), conf.as_slice().unwrap()).unwrap();
         let edge = edge.map(|e| {

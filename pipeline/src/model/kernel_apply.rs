@@ -14,7 +14,7 @@
 //! ~0.8 s per 640×480 frame); fused here it is one pass over the frame. A non-finite result
 //! (a corrupt model) falls back to the input depth: the refiner never publishes NaN.
 
-use ndarray::{Array2, ArrayView2, ArrayViewMut2, Axis};
+use ndarray::{Array2, ArrayView2, ArrayViewMut2, Axis, CowArray, Ix2};
 use rayon::prelude::*;
 
 use crate::model::manifest::RefineApply;
@@ -126,14 +126,20 @@ fn exp_fast(x: f32) -> f32 {
     };
     // Round to nearest by the 1.5·2²³ trick (vectorises without SSE4.1's round).
     const MAGIC: f32 = 12_582_912.0;
-    let n = (x * std::f32::consts::LOG2_E + MAGIC) - MAGIC;
+    let shifted = x * std::f32::consts::LOG2_E + MAGIC;
+    let n = shifted - MAGIC;
     // Cody–Waite: ln 2 in two parts, so that n·ln2 is exact enough for |n| up to 126.
     let g = (x - n * 0.693_359_4) + n * 2.121_944_4e-4;
     let p = 1.0
         + g * (1.0
             + g * (0.5
                 + g * (1.0 / 6.0 + g * (1.0 / 24.0 + g * (1.0 / 120.0 + g * (1.0 / 720.0))))));
-    f32::from_bits(((n as i32 + 127) as u32) << 23) * p
+    // 2ⁿ from the bits of `shifted` = 1.5·2²³ + n, whose low mantissa bits hold n (|n| ≤ 127,
+    // one binade): adding 127 and shifting by 23 wraps the magic's own bits away and leaves
+    // the biased exponent n + 127 — the value `(n as i32 + 127) << 23` gives, but
+    // `n as i32` (saturating, NaN → 0) was converted one lane at a time, which cost more than
+    // the rest of the function. A NaN `x` still gives NaN (through `p`).
+    f32::from_bits(shifted.to_bits().wrapping_add(127) << 23) * p
 }
 
 #[inline(always)]
@@ -163,7 +169,8 @@ pub fn apply_gated(
         maps.len() >= GATED_CHANNELS,
         "gated maps: 12 planes (a hybrid head's 13th is read by blend_classical)"
     );
-    let maps = &maps[..GATED_CHANNELS];
+    let maps = standard_layout(&maps[..GATED_CHANNELS]);
+    let maps = &maps[..];
     let (h, w) = depth.dim();
     assert_eq!(out.dim(), (h, w), "output shape");
     let (h4, w4) = maps[0].dim();
@@ -216,7 +223,8 @@ pub fn blend_classical(
     let (h, w) = depth.dim();
     assert_eq!(classical.dim(), (h, w), "classical shape");
     assert_eq!(base.dim(), (h, w), "base shape");
-    let trust_map = &maps[12];
+    let trust_map = maps[12].as_standard_layout();
+    let trust_map = &trust_map;
     let (h4, w4) = trust_map.dim();
     assert!(
         h4 * k.stride >= h && w4 * k.stride >= w,
@@ -233,37 +241,70 @@ pub fn blend_classical(
             || (vec![0.0f32; w4], vec![0.0f32; w]),
             |(low, full), (y, ((mut out, d_row), c_row))| {
                 let (y0, y1, fy) = ys[y];
-                let (r0, r1) = (trust_map.row(y0 as usize), trust_map.row(y1 as usize));
-                for ((l, a), b) in low.iter_mut().zip(r0.iter()).zip(r1.iter()) {
-                    *l = a + fy * (b - a);
-                }
+                lerp_rows(map_row(trust_map, y0), map_row(trust_map, y1), fy, low);
                 upsample_row(low, k.stride, full);
-                for (((o, &d), &c), &logit) in out
-                    .iter_mut()
-                    .zip(d_row.iter())
-                    .zip(c_row.iter())
-                    .zip(full.iter())
-                {
-                    let d_ok = crate::geometry::is_valid_depth(d);
-                    let c_ok = crate::geometry::is_valid_depth(c);
-                    *o = match (d_ok, c_ok) {
-                        (true, true) => {
-                            let t = sigmoid(logit + jump * (c - d).abs());
-                            let b = d + t * (c - d);
-                            // A corrupt trust map falls back to the measurement.
-                            if b.is_finite() {
-                                b
-                            } else {
-                                d
-                            }
-                        }
-                        (true, false) => d,
-                        (false, true) => c,
-                        (false, false) => 0.0,
-                    };
+                let (d_row, c_row) = (contiguous(&d_row), contiguous(&c_row));
+                match out.as_slice_mut() {
+                    Some(out) => blend_row(out, &d_row, &c_row, full, jump),
+                    None => {
+                        let mut row = vec![0.0; w];
+                        blend_row(&mut row, &d_row, &c_row, full, jump);
+                        out.iter_mut().zip(row).for_each(|(o, b)| *o = b);
+                    }
                 }
             },
         );
+}
+
+/// The maps in standard layout (borrowed: the runner's maps already are), so that a map row
+/// is a slice.
+fn standard_layout(maps: &[Array2<f32>]) -> Vec<CowArray<'_, f32, Ix2>> {
+    maps.iter().map(|m| m.as_standard_layout()).collect()
+}
+
+/// Row `y` of a standard-layout low-resolution map.
+#[inline]
+fn map_row<'a>(m: &'a CowArray<'_, f32, Ix2>, y: u32) -> &'a [f32] {
+    let w = m.ncols();
+    let s = m
+        .as_slice()
+        .expect("standard_layout made the maps contiguous");
+    &s[y as usize * w..(y as usize + 1) * w]
+}
+
+/// `low = a + fy · (b − a)`, the vertical tap of one low-resolution row. On slices, not
+/// ndarray row iterators, which the compiler left scalar.
+#[inline(always)]
+fn lerp_rows(a: &[f32], b: &[f32], fy: f32, low: &mut [f32]) {
+    for ((l, &a), &b) in low.iter_mut().zip(a).zip(b) {
+        *l = a + fy * (b - a);
+    }
+}
+
+/// A row as a slice, borrowed when contiguous.
+fn contiguous<'a>(row: &'a ndarray::ArrayView1<'_, f32>) -> std::borrow::Cow<'a, [f32]> {
+    match row.as_slice() {
+        Some(s) => std::borrow::Cow::Borrowed(s),
+        None => std::borrow::Cow::Owned(row.to_vec()),
+    }
+}
+
+/// One row of [`blend_classical`], written with selects (every pixel computes the blend, the
+/// validity of `d` and `c` picks the result) so that it vectorises.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
+fn blend_row(out: &mut [f32], d_row: &[f32], c_row: &[f32], logits: &[f32], jump: f32) {
+    // `is_valid_depth` without short-circuits.
+    let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
+    for (((o, &d), &c), &logit) in out.iter_mut().zip(d_row).zip(c_row).zip(logits) {
+        let t = sigmoid(logit + jump * (c - d).abs());
+        let b = d + t * (c - d);
+        // A corrupt trust map falls back to the measurement.
+        let b = if b.is_finite() { b } else { d };
+        let (d_ok, c_ok) = (valid(d), valid(c));
+        let only_c = if c_ok { c } else { 0.0 };
+        let only_d = if d_ok { d } else { only_c };
+        *o = if d_ok & c_ok { b } else { only_d };
+    }
 }
 
 /// Per-thread buffers of one output row (allocated once per rayon job, not per row).
@@ -303,7 +344,7 @@ impl RowScratch {
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
 fn gated_row(
     sc: &mut RowScratch,
-    maps: &[Array2<f32>],
+    maps: &[CowArray<'_, f32, Ix2>],
     depth: &[f32],
     (h, w): (usize, usize),
     y: usize,
@@ -314,10 +355,7 @@ fn gated_row(
 ) {
     // The 12 maps of this row at full resolution: vertical, then horizontal taps.
     for (c, m) in maps.iter().enumerate() {
-        let (r0, r1) = (m.row(y0 as usize), m.row(y1 as usize));
-        for ((d, a), b) in sc.low.iter_mut().zip(r0.iter()).zip(r1.iter()) {
-            *d = a + fy * (b - a);
-        }
+        lerp_rows(map_row(m, y0), map_row(m, y1), fy, &mut sc.low);
         upsample_row(&sc.low, k.stride, &mut sc.full[c * w..(c + 1) * w]);
     }
     // Normalised depth rows y−1, y, y+1 with one replicated column on each side.
@@ -417,6 +455,48 @@ mod tests {
         assert!((tanh(0.3) - 0.3f32.tanh()).abs() < 1e-6);
         assert!((tanh(-2.0) - (-2.0f32).tanh()).abs() < 1e-6);
         assert!((sigmoid(1.5) - 1.0 / (1.0 + (-1.5f32).exp())).abs() < 1e-6);
+    }
+
+    /// The scale 2ⁿ taken from the bits of the rounding sum is the one `n as i32` builds, bit
+    /// for bit, over the whole clamped range, past both clamps, at the rounding ties and for
+    /// NaN (which stays NaN).
+    #[test]
+    fn exp_fast_scale_from_bits_is_the_integer_conversion() {
+        let reference = |x: f32| {
+            #[allow(clippy::manual_clamp)]
+            let x = if x < -87.0 {
+                -87.0
+            } else if x > 88.0 {
+                88.0
+            } else {
+                x
+            };
+            const MAGIC: f32 = 12_582_912.0;
+            let n = (x * std::f32::consts::LOG2_E + MAGIC) - MAGIC;
+            let g = (x - n * 0.693_359_4) + n * 2.121_944_4e-4;
+            let p = 1.0
+                + g * (1.0
+                    + g * (0.5
+                        + g * (1.0 / 6.0
+                            + g * (1.0 / 24.0 + g * (1.0 / 120.0 + g * (1.0 / 720.0))))));
+            f32::from_bits(((n as i32 + 127) as u32) << 23) * p
+        };
+        let ties = (-126..=127).map(|n| (n as f32 + 0.5) * std::f32::consts::LN_2);
+        let sweep = (-1_000_000..=1_000_000).map(|i| i as f32 * 1e-4);
+        let specials = [
+            0.0,
+            -0.0,
+            1e30,
+            -1e30,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            87.9,
+            -86.9,
+        ];
+        for x in sweep.chain(ties).chain(specials) {
+            assert_eq!(exp_fast(x).to_bits(), reference(x).to_bits(), "x = {x}");
+        }
+        assert!(exp_fast(f32::NAN).is_nan() && reference(f32::NAN).is_nan());
     }
 
     #[test]
@@ -546,6 +626,23 @@ mod tests {
             &hybrid(),
         );
         assert_eq!(base[[5, 5]], 2.001);
+        // Strided views (columns of column-major arrays) give the same values bit for bit.
+        let (mut base_t, holed_t, classical_t) = (
+            Array2::zeros((8, 8)).reversed_axes(),
+            holed.t().to_owned(),
+            classical.t().to_owned(),
+        );
+        blend_classical(
+            &hybrid_maps(0.0),
+            holed_t.t(),
+            classical_t.t(),
+            base_t.view_mut(),
+            &hybrid(),
+        );
+        assert!(base_t
+            .iter()
+            .zip(&base)
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
     }
 
     #[test]
