@@ -145,28 +145,36 @@ pub fn warp_depth(src: ArrayView2<f32>, flow: &Flow, mut out: ArrayViewMut2<f32>
 /// mispredicted branches, not arithmetic, dominated the cost of this function.
 #[inline]
 fn sample_depth(src: &[f32], taps: &Taps) -> f32 {
+    blend_depth(taps.idx.map(|i| src[i]), taps.w)
+}
+
+/// [`sample_depth`] on the four tap values `d` with weights `wt`, without a branch (so that
+/// a row of samples vectorises).
+#[inline(always)]
+fn blend_depth(d: [f32; 4], wt: [f32; 4]) -> f32 {
     let mut z = [0.0f32; 4];
     let (mut best_w, mut z_ref) = (0.0f32, 0.0f32);
     for i in 0..4 {
-        let d = src[taps.idx[i]];
-        let usable = (taps.w[i] > 0.0) & is_valid_depth_branchless(d);
-        z[i] = if usable { d } else { 0.0 };
+        let usable = (wt[i] > 0.0) & is_valid_depth_branchless(d[i]);
+        z[i] = if usable { d[i] } else { 0.0 };
         // Strictly greater: ties go to the earlier tap.
-        let nearer = usable & (taps.w[i] > best_w);
-        best_w = if nearer { taps.w[i] } else { best_w };
-        z_ref = if nearer { d } else { z_ref };
-    }
-    if z_ref <= 0.0 {
-        return 0.0;
+        let nearer = usable & (wt[i] > best_w);
+        best_w = if nearer { wt[i] } else { best_w };
+        z_ref = if nearer { d[i] } else { z_ref };
     }
     let tol = surface_tolerance(z_ref);
     let (mut acc, mut wsum) = (0.0f32, 0.0f32);
-    for (&zi, &wi) in z.iter().zip(&taps.w) {
+    for (&zi, &wi) in z.iter().zip(&wt) {
         let on_surface = (zi > 0.0) & ((zi - z_ref).abs() <= tol);
         acc += if on_surface { wi * zi } else { 0.0 };
         wsum += if on_surface { wi } else { 0.0 };
     }
-    acc / wsum
+    // No usable tap (z_ref = 0): 0, not the 0/0 computed beside it.
+    if z_ref <= 0.0 {
+        0.0
+    } else {
+        acc / wsum
+    }
 }
 
 /// [`is_valid_depth`](crate::geometry::surface::is_valid_depth) without a short-circuit.
@@ -207,28 +215,124 @@ pub fn warp_depth_and_bilinear(
         .and(amplitude_out.rows_mut())
         .par_for_each(|y, mut depth_row, mut amplitude_row| {
             let (u_row, v_row) = flow.row(y);
-            let rows = depth_row.iter_mut().zip(amplitude_row.iter_mut());
-            for (x, ((od, oa), (&u, &v))) in rows.zip(u_row.iter().zip(v_row)).enumerate() {
-                (*od, *oa) = match bilinear_taps(x as f32 + u, y as f32 + v, h, w) {
-                    Some(taps) => (sample_depth(d, &taps), sample_bilinear(a, &taps)),
-                    None => (0.0, 0.0),
-                };
+            match (depth_row.as_slice_mut(), amplitude_row.as_slice_mut()) {
+                (Some(od), Some(oa)) => fused_row(d, a, (h, w), y, (u_row, v_row), od, oa),
+                _ => {
+                    let (mut od, mut oa) = (vec![0.0; u_row.len()], vec![0.0; u_row.len()]);
+                    fused_row(d, a, (h, w), y, (u_row, v_row), &mut od, &mut oa);
+                    depth_row.iter_mut().zip(od).for_each(|(o, v)| *o = v);
+                    amplitude_row.iter_mut().zip(oa).for_each(|(o, v)| *o = v);
+                }
             }
         });
+}
+
+/// `⌊c⌋` for `0 ≤ c < 2²²` without a float-to-integer conversion (which the compiler converts
+/// one lane at a time): `c + 1.5·2²³` rounds `c` to the nearest integer, held in the low bits
+/// of the sum's representation; one less where that rounded up.
+#[inline(always)]
+fn floor_small(c: f32) -> u32 {
+    const MAGIC: f32 = 12_582_912.0;
+    let r = (c + MAGIC).to_bits().wrapping_sub(MAGIC.to_bits());
+    r - u32::from(r as f32 > c)
+}
+
+/// Output pixels [`fused_row`] stages at a time (the staging arrays stay in L1).
+const FUSED_CHUNK: usize = 64;
+
+/// One output row of [`warp_depth_and_bilinear`]: the same taps as [`bilinear_taps`] and the
+/// same blends as [`sample_depth`] and [`sample_bilinear`], bit for bit, in three passes over
+/// [`FUSED_CHUNK`] pixels so that the arithmetic vectorises: the taps of every pixel (a sample
+/// outside the source computed at (0, 0) and replaced by 0 at the end), then the eight source
+/// values loaded (the only scalar pass), then the blends. Sources of more than 2³² pixels, or
+/// wider or taller than 2²², go through the per-pixel functions.
+#[allow(clippy::too_many_arguments)]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
+fn fused_row(
+    d: &[f32],
+    a: &[f32],
+    (h, w): (usize, usize),
+    y: usize,
+    (u_row, v_row): (&[f32], &[f32]),
+    depth_out: &mut [f32],
+    amplitude_out: &mut [f32],
+) {
+    let n = depth_out
+        .len()
+        .min(amplitude_out.len())
+        .min(u_row.len())
+        .min(v_row.len());
+    let small = (1..1 << 22).contains(&h) && (1..1 << 22).contains(&w);
+    if !small || h * w > u32::MAX as usize || n >= 1 << 22 {
+        let rows = depth_out.iter_mut().zip(amplitude_out.iter_mut());
+        for (x, ((od, oa), (&u, &v))) in rows.zip(u_row.iter().zip(v_row)).enumerate() {
+            (*od, *oa) = match bilinear_taps(x as f32 + u, y as f32 + v, h, w) {
+                Some(taps) => (sample_depth(d, &taps), sample_bilinear(a, &taps)),
+                None => (0.0, 0.0),
+            };
+        }
+        return;
+    }
+    let (w32, h32) = (w as u32, h as u32);
+    let (x_max, y_max, yf) = ((w - 1) as f32, (h - 1) as f32, y as f32);
+    let mut idx = [[0u32; FUSED_CHUNK]; 4];
+    let mut wt = [[0.0f32; FUSED_CHUNK]; 4];
+    let mut inside = [false; FUSED_CHUNK];
+    let (mut dv, mut av) = ([[0.0f32; FUSED_CHUNK]; 4], [[0.0f32; FUSED_CHUNK]; 4]);
+    let (mut zo, mut bo) = ([0.0f32; FUSED_CHUNK], [0.0f32; FUSED_CHUNK]);
+    for start in (0..n).step_by(FUSED_CHUNK) {
+        let m = FUSED_CHUNK.min(n - start);
+        let (u, v) = (&u_row[start..start + m], &v_row[start..start + m]);
+        // Taps. Past `m` (the row's last chunk) lanes compute at u = v = 0 and are dropped.
+        for j in 0..FUSED_CHUNK {
+            let (du, dv) = if j < m { (u[j], v[j]) } else { (0.0, 0.0) };
+            let (sx, sy) = ((start + j) as u32 as f32 + du, yf + dv);
+            // `bilinear_taps`'s test, NaN failing it.
+            let ok = (sx >= 0.0) & (sx <= x_max) & (sy >= 0.0) & (sy <= y_max);
+            let (sx, sy) = if ok { (sx, sy) } else { (0.0, 0.0) };
+            let (x0, y0) = (floor_small(sx).min(w32 - 1), floor_small(sy).min(h32 - 1));
+            let (x1, y1) = ((x0 + 1).min(w32 - 1), (y0 + 1).min(h32 - 1));
+            let (fx, fy) = (sx - x0 as f32, sy - y0 as f32);
+            inside[j] = ok;
+            (idx[0][j], idx[1][j]) = (y0 * w32 + x0, y0 * w32 + x1);
+            (idx[2][j], idx[3][j]) = (y1 * w32 + x0, y1 * w32 + x1);
+            wt[0][j] = (1.0 - fx) * (1.0 - fy);
+            wt[1][j] = fx * (1.0 - fy);
+            wt[2][j] = (1.0 - fx) * fy;
+            wt[3][j] = fx * fy;
+        }
+        // Loads.
+        for k in 0..4 {
+            for j in 0..m {
+                let i = idx[k][j] as usize;
+                (dv[k][j], av[k][j]) = (d[i], a[i]);
+            }
+        }
+        // Blends.
+        for j in 0..FUSED_CHUNK {
+            let tap_wt = [wt[0][j], wt[1][j], wt[2][j], wt[3][j]];
+            let z = blend_depth([dv[0][j], dv[1][j], dv[2][j], dv[3][j]], tap_wt);
+            let b = blend_bilinear([av[0][j], av[1][j], av[2][j], av[3][j]], tap_wt);
+            zo[j] = if inside[j] { z } else { 0.0 };
+            bo[j] = if inside[j] { b } else { 0.0 };
+        }
+        depth_out[start..start + m].copy_from_slice(&zo[..m]);
+        amplitude_out[start..start + m].copy_from_slice(&bo[..m]);
+    }
 }
 
 /// The bilinear blend of [`warp_bilinear`] at one sample point. Zero-weight taps are skipped
 /// so that a NaN beyond the sample's cell cannot leak in.
 #[inline]
 fn sample_bilinear(src: &[f32], t: &Taps) -> f32 {
+    blend_bilinear(t.idx.map(|i| src[i]), t.w)
+}
+
+/// [`sample_bilinear`] on the four tap values `v` with weights `wt`.
+#[inline(always)]
+fn blend_bilinear(v: [f32; 4], wt: [f32; 4]) -> f32 {
     (0..4)
-        .map(|i| {
-            if t.w[i] > 0.0 {
-                t.w[i] * src[t.idx[i]]
-            } else {
-                0.0
-            }
-        })
+        .map(|i| if wt[i] > 0.0 { wt[i] * v[i] } else { 0.0 })
         .sum()
 }
 
@@ -455,41 +559,49 @@ mod tests {
     #[test]
     fn the_fused_warp_is_both_warps() {
         // A depth step with holes and a NaN amplitude, under a non-uniform flow reaching
-        // outside the image.
-        let (h, w) = (23, 31);
-        let depth = Array2::from_shape_fn((h, w), |(y, x)| match (y * 7 + x * 3) % 13 {
-            0 => 0.0,
-            k if x < 15 => 1.0 + 0.01 * k as f32,
-            k => 2.5 + 0.02 * k as f32,
-        });
-        let amplitude = Array2::from_shape_fn((h, w), |(y, x)| {
-            if (y, x) == (11, 9) {
-                f32::NAN
-            } else {
-                (y * w + x) as f32 * 0.37
-            }
-        });
-        let flow = Flow {
-            u: Array2::from_shape_fn((h, w), |(y, x)| 0.31 * x as f32 - 4.7 + 0.05 * y as f32),
-            v: Array2::from_shape_fn((h, w), |(y, x)| -0.23 * y as f32 + 2.1 + 0.03 * x as f32),
-        };
-        let (mut d1, mut a1) = (Array2::zeros((h, w)), Array2::zeros((h, w)));
-        warp_depth(depth.view(), &flow, d1.view_mut());
-        warp_bilinear(amplitude.view(), &flow, a1.view_mut(), None);
-        let (mut d2, mut a2) = (Array2::zeros((h, w)), Array2::zeros((h, w)));
-        warp_depth_and_bilinear(
-            depth.view(),
-            amplitude.view(),
-            &flow,
-            d2.view_mut(),
-            a2.view_mut(),
-        );
-        let bits = |a: &Array2<f32>| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-        assert_eq!(bits(&d1), bits(&d2));
-        assert_eq!(bits(&a1), bits(&a2));
-        // The case covers what it claims: zeros outside, blends, and the NaN.
-        assert!(d1.iter().any(|&z| z == 0.0) && d1.iter().any(|&z| z > 2.0));
-        assert!(a1.iter().any(|v| v.is_nan()));
+        // outside the image, a NaN flow and samples exactly on the last row and column; rows
+        // shorter than the fused row's chunk, and longer (two chunks and a part).
+        for (h, w) in [(23, 31), (9, 150)] {
+            let depth = Array2::from_shape_fn((h, w), |(y, x)| match (y * 7 + x * 3) % 13 {
+                0 => 0.0,
+                k if x < 15 => 1.0 + 0.01 * k as f32,
+                k => 2.5 + 0.02 * k as f32,
+            });
+            let amplitude = Array2::from_shape_fn((h, w), |(y, x)| {
+                if (y, x) == (5, 9) {
+                    f32::NAN
+                } else {
+                    (y * w + x) as f32 * 0.37
+                }
+            });
+            let mut flow = Flow {
+                u: Array2::from_shape_fn((h, w), |(y, x)| 0.31 * x as f32 - 4.7 + 0.05 * y as f32),
+                v: Array2::from_shape_fn((h, w), |(y, x)| -0.23 * y as f32 + 2.1 + 0.03 * x as f32),
+            };
+            flow.u[(3, 4)] = f32::NAN;
+            // (2, 6) samples the bottom-right pixel centre exactly; (4, 2) the last column.
+            (flow.u[(2, 6)], flow.v[(2, 6)]) = ((w - 1 - 6) as f32, (h - 1 - 2) as f32);
+            (flow.u[(4, 2)], flow.v[(4, 2)]) = ((w - 1 - 2) as f32, 0.5);
+            let (mut d1, mut a1) = (Array2::zeros((h, w)), Array2::zeros((h, w)));
+            warp_depth(depth.view(), &flow, d1.view_mut());
+            warp_bilinear(amplitude.view(), &flow, a1.view_mut(), None);
+            let (mut d2, mut a2) = (Array2::zeros((h, w)), Array2::zeros((h, w)));
+            warp_depth_and_bilinear(
+                depth.view(),
+                amplitude.view(),
+                &flow,
+                d2.view_mut(),
+                a2.view_mut(),
+            );
+            let bits = |a: &Array2<f32>| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&d1), bits(&d2), "{h}x{w}");
+            assert_eq!(bits(&a1), bits(&a2), "{h}x{w}");
+            // The case covers what it claims: zeros outside, blends, and the NaN.
+            assert!(d1.iter().any(|&z| z == 0.0) && d1.iter().any(|&z| z > 2.0));
+            assert!(a1.iter().any(|v| v.is_nan()));
+            assert_eq!(a1[(2, 6)], amplitude[(h - 1, w - 1)]);
+            assert_eq!((d1[(3, 4)], a1[(3, 4)]), (0.0, 0.0));
+        }
     }
 
     #[test]
