@@ -35,7 +35,7 @@ use crate::filter::fill::{fill_holes, FillParams};
 use crate::filter::flying::remove_flying_pixels;
 use crate::filter::outlier::reject_outliers;
 use crate::filter::snap::snap_to_surface;
-use crate::geometry::surface::{is_valid_depth, surface_tolerance};
+use crate::geometry::surface::surface_tolerance;
 
 /// Runs `f(y, a_row, b_row)` on every row of `a` and `b` (same number of rows), rows in
 /// parallel, on contiguous row slices so that the stages' inner loops are flat (and
@@ -287,26 +287,39 @@ impl ClassicalRefiner {
             slice(&s.flying_snapped),
             slice(&s.outlier_replaced),
         );
+        // Written with selects (every pixel computes every case; validity and the flags pick
+        // one) so that the loop vectorises: holes make the branches unpredictable.
+        let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
         par_rows2(out_depth, out_confidence, |y, out_row, conf_row| {
             let row = y * w..(y + 1) * w;
+            let (filled, surfaced, measured) = (
+                &filled[row.clone()],
+                &surfaced[row.clone()],
+                &measured[row.clone()],
+            );
+            let (fill_confidence, flying_snapped, outlier_replaced) = (
+                &fill_confidence[row.clone()],
+                &flying_snapped[row.clone()],
+                &outlier_replaced[row],
+            );
             for (x, (o, c)) in out_row.iter_mut().zip(conf_row.iter_mut()).enumerate() {
-                let i = row.start + x;
-                let (d, z) = (filled[i], surfaced[i]);
-                if !is_valid_depth(d) || !is_valid_depth(z) {
-                    (*o, *c) = (0.0, 0);
-                    continue;
-                }
-                let fc = match fill_confidence[i] {
-                    0 if flying_snapped[i] || outlier_replaced[i] => REPLACED_CONFIDENCE,
+                let (d, z, measured) = (filled[x], surfaced[x], measured[x]);
+                let ok = valid(d) & valid(z);
+                let replaced = flying_snapped[x] | outlier_replaced[x];
+                let fc = match fill_confidence[x] {
+                    0 if replaced => REPLACED_CONFIDENCE,
                     fc => fc,
                 };
-                *o = z;
-                *c = if fc > 0 {
+                // Measured here (used where fc = 0): lower the larger the smoothing's correction.
+                let change = (z - measured).abs() / surface_tolerance(measured);
+                let smoothed = 255 - round_small(127.0 * change.min(1.0));
+                *o = if ok { z } else { 0.0 };
+                *c = if !ok {
+                    0
+                } else if fc > 0 {
                     fc
                 } else {
-                    let measured = measured[i];
-                    let change = (z - measured).abs() / surface_tolerance(measured);
-                    255 - round_small(127.0 * change.min(1.0))
+                    smoothed
                 };
             }
         });

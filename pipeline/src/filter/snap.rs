@@ -11,7 +11,7 @@
 use ndarray::{ArrayView2, ArrayViewMut2};
 
 use crate::filter::par_rows2;
-use crate::geometry::surface::{is_valid_depth, same_surface};
+use crate::geometry::surface::same_surface;
 
 /// For every pixel with a valid `value`: keeps it when a valid `reference` depth within
 /// `radius` (Chebyshev distance, the pixel itself included) is on its surface, else replaces
@@ -63,15 +63,11 @@ pub fn snap_to_surface(
             (*o, *f) = (if keep { v } else { 0.0 }, false);
         }
         let (y0, y1) = (y.saturating_sub(radius), (y + radius).min(h - 1));
-        for (x, (o, f)) in out_row.iter_mut().zip(flag_row.iter_mut()).enumerate() {
-            let v = value_row[x];
-            if *o != 0.0 || !is_valid_depth(v) {
-                continue;
-            }
+        // Every valid value not kept above: search the window, without branches on the data
+        // (valid and invalid depths mix at random near holes): whether any valid reference is
+        // on the value's surface, and the first (row-major) of the valid ones nearest to it.
+        let search = |x: usize, v: f32| {
             let (x0, x1) = (x.saturating_sub(radius), (x + radius).min(w - 1));
-            // Without branches on the data (valid and invalid depths mix at random near
-            // holes): whether any valid reference is on the value's surface, and the first
-            // (row-major) of the valid ones nearest to it.
             let mut nearest = (f32::INFINITY, 0.0f32);
             let mut on_surface = false;
             for yy in y0..=y1 {
@@ -85,9 +81,26 @@ pub fn snap_to_surface(
                 }
             }
             if on_surface {
-                *o = v;
+                (v, false)
             } else if nearest.0.is_finite() {
-                (*o, *f) = (nearest.1, true);
+                (nearest.1, true)
+            } else {
+                (0.0, false)
+            }
+        };
+        // The pixels to search are found 64 at a time as a bit mask: a branch per pixel on
+        // whether it needs the search was mispredicted often enough to cost more than the
+        // searches themselves.
+        for start in (0..w).step_by(64) {
+            let end = (start + 64).min(w);
+            let mut pending = (start..end).fold(0u64, |bits, x| {
+                let needs_search = (out_row[x] == 0.0) & valid(value_row[x]);
+                bits | (u64::from(needs_search) << (x - start))
+            });
+            while pending != 0 {
+                let x = start + pending.trailing_zeros() as usize;
+                pending &= pending - 1;
+                (out_row[x], flag_row[x]) = search(x, value_row[x]);
             }
         }
     });
