@@ -42,10 +42,14 @@ impl Calibration {
     /// Returns `None` for a non-positive or non-finite depth (no valid flow there).
     #[inline]
     pub fn flow_at(&self, z: f32) -> Option<(f32, f32)> {
-        if crate::frame::is_valid_depth(z) {
-            Some((self.tx / z + self.cx, self.ty / z + self.cy))
-        } else {
-            None
-        }
+        crate::frame::is_valid_depth(z).then(|| self.flow_formula(z))
+    }
+
+    /// The formula of [`flow_at`](Self::flow_at) evaluated at any `z` (infinite or NaN at an
+    /// invalid depth), for loops that compute every pixel and select the valid ones without
+    /// a branch.
+    #[inline(always)]
+    pub fn flow_formula(&self, z: f32) -> (f32, f32) {
+        (self.tx / z + self.cx, self.ty / z + self.cy)
     }
 }

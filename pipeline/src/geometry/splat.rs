@@ -382,11 +382,13 @@ impl SplatScratch {
                 a[1] += front;
                 a[3] += front * z;
             });
-            // Pass 3: normalise and validate.
+            // Pass 3: normalise and validate (selects again: coverage and holes are
+            // irregular). `flow_at(z)` is `Some` exactly where `z` is a valid depth.
+            let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
             for (o, a) in out.iter_mut().zip(acc.iter()) {
                 let [_, ws, any, zs] = *a;
                 let z = zs / ws.max(f32::MIN_POSITIVE);
-                *o = if ws > 0.0 && any >= SPLAT_MIN_COVERAGE && p.flow_at(z).is_some() {
+                *o = if (ws > 0.0) & (any >= SPLAT_MIN_COVERAGE) & valid(z) {
                     z
                 } else {
                     0.0
@@ -395,7 +397,8 @@ impl SplatScratch {
             if let Some((u, v, fallback)) = flow {
                 let fallback = fallback.unwrap_or((0.0, 0.0));
                 for ((u, v), &z) in u.iter_mut().zip(v.iter_mut()).zip(out.iter()) {
-                    (*u, *v) = p.flow_at(z).unwrap_or(fallback);
+                    let at = p.flow_formula(z);
+                    (*u, *v) = if valid(z) { at } else { fallback };
                 }
             }
         };
