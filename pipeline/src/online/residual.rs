@@ -24,8 +24,6 @@
 use ndarray::{ArrayView2, ArrayView3};
 use rayon::prelude::*;
 
-use crate::geometry::surface::is_valid_depth;
-
 /// Fewest sampled pixels for a meaningful correlation.
 pub const MIN_SAMPLES: usize = 64;
 
@@ -293,20 +291,42 @@ impl EdgeCheck {
                 // sqrt, not hypot: no overflow to guard against here, and hypot was 4 % of
                 // a VGA frame.
                 let magnitude = |gx: f32, gy: f32| (gx * gx + gy * gy).sqrt();
-                for x in 1..w.saturating_sub(1) {
-                    let ok = [d1[x], d0[x], d2[x], d1[x - 1], d1[x + 1]]
-                        .iter()
-                        .all(|&z| is_valid_depth(z));
-                    if !ok {
-                        continue;
-                    }
-                    let ga = magnitude(a1[x + 1] - a1[x - 1], a2[x] - a0[x]);
-                    if !ga.is_finite() {
-                        continue;
-                    }
-                    ag[x] = ga;
-                    lg[x] = magnitude(l1[x + 1] - l1[x - 1], l2[x] - l0[x]);
-                    valid[x] = true;
+                // `is_valid_depth` without short-circuits; the loop is written with selects
+                // (every pixel computes both gradients, validity picks them) so that it
+                // vectorises: holes make branches on validity unpredictable.
+                let valid_depth = |z: f32| (z > 0.0) & (z < f32::INFINITY);
+                if w < 3 {
+                    return;
+                }
+                // Equal-length slices of the neighbours (left, right, up, down, centre), so
+                // that the loop has no bounds checks left to stop it vectorising.
+                let n = w - 2;
+                fn centre(r: &[f32]) -> &[f32] {
+                    &r[1..r.len() - 1]
+                }
+                fn left(r: &[f32]) -> &[f32] {
+                    &r[..r.len() - 2]
+                }
+                fn right(r: &[f32]) -> &[f32] {
+                    &r[2..]
+                }
+                let (dc, dl, dr, du, dd) =
+                    (centre(d1), left(d1), right(d1), centre(d0), centre(d2));
+                let (al, ar, au, ad) = (left(a1), right(a1), centre(a0), centre(a2));
+                let (ll, lr, lu, ld) = (left(l1), right(l1), centre(l0), centre(l2));
+                let (ag, lg, valid) = (&mut ag[1..=n], &mut lg[1..=n], &mut valid[1..=n]);
+                for i in 0..n {
+                    let ok = valid_depth(dc[i])
+                        & valid_depth(du[i])
+                        & valid_depth(dd[i])
+                        & valid_depth(dl[i])
+                        & valid_depth(dr[i]);
+                    let ga = magnitude(ar[i] - al[i], ad[i] - au[i]);
+                    let gl = magnitude(lr[i] - ll[i], ld[i] - lu[i]);
+                    let ok = ok & ga.is_finite();
+                    ag[i] = if ok { ga } else { 0.0 };
+                    lg[i] = if ok { gl } else { 0.0 };
+                    valid[i] = ok;
                 }
             });
     }
