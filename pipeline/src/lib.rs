@@ -28,6 +28,7 @@ pub mod metrics;
 #[cfg(feature = "inference")]
 pub mod model;
 pub mod online;
+mod vector_math;
 
 // The capture format and the frame and calibration types it reads are the `dear-capture`
 // crate; these paths keep `dear_pipeline::capture`, `crate::frame` and the like working.

@@ -23,6 +23,7 @@ use ndarray::{ArrayView2, ArrayViewMut2, Axis, Zip};
 use rayon::prelude::*;
 
 use crate::geometry::surface::{is_valid_depth, surface_tolerance};
+use crate::vector_math::{exp_fast, floor_small};
 
 /// Writes the confidence of `refined` given the refinement input `warped` into `out`.
 ///
@@ -57,73 +58,118 @@ pub fn confidence_into(
             .enumerate()
             .for_each_init(support, |support, (y, row)| {
                 let (a, b) = row_of(y);
-                confidence_row(warped, &refined[a..b], w, y, support, |x, c| row[x] = c);
+                confidence_row(warped, &refined[a..b], y, support, row);
             }),
         None => Zip::indexed(out.axis_iter_mut(Axis(0))).par_for_each(|y, mut row| {
             let (a, b) = row_of(y);
-            let mut support = support();
-            confidence_row(warped, &refined[a..b], w, y, &mut support, |x, c| {
-                row[x] = c
-            });
+            let (mut support, mut values) = (support(), vec![0u8; w]);
+            confidence_row(warped, &refined[a..b], y, &mut support, &mut values);
+            row.iter_mut().zip(values).for_each(|(o, v)| *o = v);
         }),
     }
 }
 
-/// Confidence of row `y` (`warped` is the whole image, `refined` the row), passed to
-/// `put(column, value)`; `support` is a row of scratch.
+/// Confidence of row `y` into `out` (`warped` is the whole image, `refined` the row);
+/// `support` is a row of scratch.
 ///
-/// The 3×3 support of the pixels with all nine neighbours is counted first, for the whole row
-/// in one branch-free loop ([`interior_support`], which the compiler vectorises), then each
-/// pixel's value is made (the border's support counted there, over the rows and columns that
-/// exist). `round` is done by truncation, which gives `f32::round`'s result for the
-/// non-negative values below 2²³ met here: without SSE4.1 (the default x86-64 target)
-/// `round` is a call per pixel.
+/// Pixels with all nine neighbours go through [`interior_support`] and [`interior_confidence`],
+/// loops the compiler vectorises; the border (the first and last column, and the first and last
+/// row whole) through [`pixel_confidence`], the definition, which counts the support over the
+/// rows and columns that exist.
 #[inline]
-fn confidence_row(
-    warped: &[f32],
-    refined: &[f32],
-    w: usize,
-    y: usize,
-    support: &mut [u8],
-    mut put: impl FnMut(usize, u8),
-) {
+fn confidence_row(warped: &[f32], refined: &[f32], y: usize, support: &mut [u8], out: &mut [u8]) {
+    let w = refined.len();
     let h = warped.len() / w;
     let row = |yy: usize| &warped[yy * w..(yy + 1) * w];
     let centre = row(y);
     let above = (y > 0).then(|| row(y - 1));
     let below = (y + 1 < h).then(|| row(y + 1));
-    let interior = match (above, below) {
+    let border: &mut dyn Iterator<Item = usize> = match (above, below) {
         (Some(a), Some(b)) if w >= 3 => {
-            interior_support(a, centre, b, &mut support[1..w - 1]);
-            1..w - 1
-        }
-        _ => 0..0,
-    };
-    for (x, (&z, &r)) in centre.iter().zip(refined).enumerate() {
-        if !is_valid_depth(z) || !is_valid_depth(r) {
-            put(x, 0);
-            continue;
-        }
-        let tol = surface_tolerance(z);
-        let support = if interior.contains(&x) {
-            u32::from(support[x])
-        } else {
-            let (x0, x1) = (x.saturating_sub(1), (x + 1).min(w - 1));
-            let mut support = 0u32;
-            for r in [above, Some(centre), below].into_iter().flatten() {
-                for &q in &r[x0..=x1] {
-                    support += on_surface(z, tol, q);
-                }
+            let inner = 1..w - 1;
+            interior_support(a, centre, b, &mut support[inner.clone()]);
+            interior_confidence(
+                &centre[inner.clone()],
+                &refined[inner.clone()],
+                &mut support[inner.clone()],
+                &mut out[inner.clone()],
+            );
+            // The rare pixel too close to a rounding boundary for the fast `exp`: flagged in
+            // `support`, made again by the definition.
+            for x in inner.filter(|&x| support[x] != 0) {
+                out[x] = pixel_confidence(above, centre, below, refined[x], x);
             }
-            support
-        };
-        let agreement = (-(r - z).abs() / tol).exp();
-        let c = 255.0 * support as f32 / 9.0 * agreement;
-        let t = c as u32;
-        let rounded = if c - t as f32 >= 0.5 { t + 1 } else { t };
-        // At least 1: 0 is reserved for "no depth here", so a valid but barely supported depth
-        // (e.g. a lone measured pixel the refinement moved far) must not read as invalid.
-        put(x, rounded.clamp(1, 255) as u8);
+            &mut [0, w - 1].into_iter()
+        }
+        _ => &mut (0..w),
+    };
+    for x in border {
+        out[x] = pixel_confidence(above, centre, below, refined[x], x);
+    }
+}
+
+/// The definition at column `x`, for any pixel: the support counted over the rows (`above`,
+/// `centre`, `below`) and columns that exist, `f32::exp` for the agreement, and `round` done
+/// by truncation, which gives `f32::round`'s result for the non-negative values below 2²³ met
+/// here (without SSE4.1, the default x86-64 target, `round` is a call per pixel).
+fn pixel_confidence(
+    above: Option<&[f32]>,
+    centre: &[f32],
+    below: Option<&[f32]>,
+    r: f32,
+    x: usize,
+) -> u8 {
+    let z = centre[x];
+    if !is_valid_depth(z) || !is_valid_depth(r) {
+        return 0;
+    }
+    let tol = surface_tolerance(z);
+    let (x0, x1) = (x.saturating_sub(1), (x + 1).min(centre.len() - 1));
+    let mut support = 0u32;
+    for r in [above, Some(centre), below].into_iter().flatten() {
+        for &q in &r[x0..=x1] {
+            support += on_surface(z, tol, q);
+        }
+    }
+    let agreement = (-(r - z).abs() / tol).exp();
+    let c = 255.0 * support as f32 / 9.0 * agreement;
+    let t = c as u32;
+    let rounded = if c - t as f32 >= 0.5 { t + 1 } else { t };
+    // At least 1: 0 is reserved for "no depth here", so a valid but barely supported depth
+    // (e.g. a lone measured pixel the refinement moved far) must not read as invalid.
+    rounded.clamp(1, 255) as u8
+}
+
+/// How close (in 1/255 units) to a rounding boundary the fast path's value may be and still be
+/// trusted: [`exp_fast`]'s relative error (below 10⁻⁶, tested with it) and the standard `exp`'s
+/// last bit move a value of at most 255 by less than 3·10⁻⁴.
+const ROUNDING_MARGIN: f32 = 1e-3;
+
+/// [`pixel_confidence`] of interior pixels from their counted `support` (replaced by 1 where
+/// the result must be made again by the definition, else 0), with [`exp_fast`] and rounding
+/// without a float-to-integer conversion, written with selects so that it vectorises. The
+/// result equals the definition's wherever the value is not within [`ROUNDING_MARGIN`] of a
+/// rounding boundary; those pixels are flagged.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
+fn interior_confidence(centre: &[f32], refined: &[f32], support: &mut [u8], out: &mut [u8]) {
+    let n = out.len();
+    let (centre, refined, support) = (&centre[..n], &refined[..n], &mut support[..n]);
+    let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
+    for i in 0..n {
+        let (z, r) = (centre[i], refined[i]);
+        let ok = valid(z) & valid(r);
+        let tol = surface_tolerance(z);
+        let agreement = exp_fast(-(r - z).abs() / tol);
+        let c = 255.0 * f32::from(support[i]) / 9.0 * agreement;
+        // Only a valid pixel's value is in [0, 255], where `floor_small` holds; the others
+        // are replaced by 0 below whatever it returns.
+        let c = if ok { c } else { 0.0 };
+        let t = floor_small(c);
+        let fraction = c - t as f32;
+        let rounded = t + u32::from(fraction >= 0.5);
+        let near_boundary = ok & ((fraction - 0.5).abs() < ROUNDING_MARGIN);
+        out[i] = if ok { rounded.clamp(1, 255) as u8 } else { 0 };
+        support[i] = u8::from(near_boundary);
     }
 }
 
@@ -215,5 +261,43 @@ mod tests {
         for ((y, x), &c) in out.indexed_iter() {
             assert_eq!(c == 0, (y, x) != (2, 2), "({y}, {x})");
         }
+    }
+
+    /// Every pixel is the definition's value ([`pixel_confidence`]), bit for bit: on a frame
+    /// with holes, NaNs and depth steps, and refined depths placed so that most values land
+    /// within a hair of a rounding boundary, where the fast `exp` alone would round some of
+    /// them the other way.
+    #[test]
+    fn every_pixel_is_the_definition() {
+        let (h, w) = (40, 211);
+        let warped = Array2::from_shape_fn((h, w), |(y, x)| match (x * 7 + y * 13) % 29 {
+            0 => 0.0,
+            1 => f32::NAN,
+            k if x < 90 => 0.8 + 0.0005 * k as f32,
+            k => 2.4 + 0.001 * k as f32,
+        });
+        let refined = Array2::from_shape_fn((h, w), |(y, x)| {
+            let z = warped[(y, x)];
+            if (x + y) % 31 == 0 {
+                return 0.0;
+            }
+            // 255 · exp(−d / tol) = k + ½ for a level k picked per pixel.
+            let level = ((x * 5 + y * 11) % 254) as f32 + 1.5;
+            let d = -surface_tolerance(z) * (level / 255.0).ln();
+            if x % 2 == 0 {
+                z + d
+            } else {
+                z - d
+            }
+        });
+        let mut out = Array2::zeros((h, w));
+        confidence_into(warped.view(), refined.view(), out.view_mut());
+        let row = |y: usize| warped.row(y).to_slice().unwrap();
+        for ((y, x), &c) in out.indexed_iter() {
+            let (above, below) = ((y > 0).then(|| row(y - 1)), (y + 1 < h).then(|| row(y + 1)));
+            let expected = pixel_confidence(above, row(y), below, refined[(y, x)], x);
+            assert_eq!(c, expected, "({y}, {x})");
+        }
+        assert!(out.iter().filter(|&&c| c > 1 && c < 255).count() > h * w / 2);
     }
 }

@@ -17,6 +17,7 @@ use ndarray::{
 
 use crate::frame::Flow;
 use crate::geometry::surface::surface_tolerance;
+use crate::vector_math::floor_small;
 
 /// The four bilinear neighbours of a sample point and their weights, in the fixed order
 /// `(y0,x0), (y0,x1), (y1,x0), (y1,x1)` (ties between equal weights go to the earlier one).
@@ -225,16 +226,6 @@ pub fn warp_depth_and_bilinear(
                 }
             }
         });
-}
-
-/// `⌊c⌋` for `0 ≤ c < 2²²` without a float-to-integer conversion (which the compiler converts
-/// one lane at a time): `c + 1.5·2²³` rounds `c` to the nearest integer, held in the low bits
-/// of the sum's representation; one less where that rounded up.
-#[inline(always)]
-fn floor_small(c: f32) -> u32 {
-    const MAGIC: f32 = 12_582_912.0;
-    let r = (c + MAGIC).to_bits().wrapping_sub(MAGIC.to_bits());
-    r - u32::from(r as f32 > c)
 }
 
 /// Output pixels [`fused_row`] stages at a time (the staging arrays stay in L1).
