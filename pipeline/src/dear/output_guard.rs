@@ -127,6 +127,11 @@ impl OutputGuard {
             .par_fold(
                 RefinementCheck::default,
                 |mut counts, mut o, z, r| {
+                    if let (Some(o), Some(z), Some(r)) =
+                        (o.as_slice_mut(), z.to_slice(), r.to_slice())
+                    {
+                        return counts.add(self.check_row(o, z, r));
+                    }
                     ndarray::Zip::from(&mut o)
                         .and(&z)
                         .and(&r)
@@ -142,6 +147,33 @@ impl OutputGuard {
                 },
                 RefinementCheck::add,
             )
+    }
+
+    /// [`check_into`](Self::check_into) of one row on slices: [`count`](Self::count) and the
+    /// published value written with selects, so that the loop vectorises (holes make the
+    /// branches of `count` unpredictable).
+    fn check_row(&self, out: &mut [f32], warped: &[f32], refined: &[f32]) -> RefinementCheck {
+        let n = out.len();
+        let (warped, refined) = (&warped[..n], &refined[..n]);
+        let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
+        let [mut measured, mut non_finite, mut non_positive, mut moved_too_far] = [0u32; 4];
+        for i in 0..n {
+            let (z, r) = (warped[i], refined[i]);
+            let (measured_here, finite) = (valid(z), r.is_finite());
+            let bound = self.max_change_m.max(self.max_change_ratio * z);
+            out[i] = if measured_here & valid(r) { r } else { 0.0 };
+            measured += u32::from(measured_here);
+            non_finite += u32::from(measured_here & !finite);
+            non_positive += u32::from(measured_here & finite & (r <= 0.0));
+            moved_too_far +=
+                u32::from(measured_here & finite & (r > 0.0) & ((r - z).abs() > bound));
+        }
+        RefinementCheck {
+            measured: measured as usize,
+            non_finite: non_finite as usize,
+            non_positive: non_positive as usize,
+            moved_too_far: moved_too_far as usize,
+        }
     }
 
     /// Counts one pixel's output `r` for the measured depth `z`.
@@ -231,10 +263,12 @@ mod tests {
         let z = scene();
         // Every kind of output: moved a little, NaN, negative, too far, and refined where
         // nothing was measured.
-        let r = Array2::from_shape_fn(z.dim(), |(y, x)| match (y * 30 + x) % 7 {
+        let r = Array2::from_shape_fn(z.dim(), |(y, x)| match (y * 30 + x) % 9 {
             0 => f32::NAN,
             1 => -1.0,
             2 => z[[y, x]] * 1000.0,
+            3 => f32::INFINITY,
+            4 => 0.0,
             _ => 1.5 + 0.01 * x as f32,
         });
         let guard = OutputGuard::default();

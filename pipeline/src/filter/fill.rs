@@ -7,9 +7,10 @@
 //! the side whose colour matches and never with an average of foreground and background.
 //! Pixels with no valid depth within the radius stay invalid.
 
-use ndarray::{ArrayView2, ArrayView3, ArrayViewMut2, Axis, Zip};
+use ndarray::{ArrayView2, ArrayView3, ArrayViewMut2};
 
-use crate::geometry::surface::{is_valid_depth, same_surface};
+use crate::filter::par_rows2;
+use crate::geometry::surface::same_surface;
 
 /// Settings of [`fill_holes`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -47,8 +48,8 @@ pub fn fill_holes(
     depth: ArrayView2<f32>,
     rgb: ArrayView3<u8>,
     params: &FillParams,
-    mut out: ArrayViewMut2<f32>,
-    mut fill_confidence: ArrayViewMut2<u8>,
+    out: ArrayViewMut2<f32>,
+    fill_confidence: ArrayViewMut2<u8>,
 ) {
     let (h, w) = depth.dim();
     let channels = rgb.dim().2;
@@ -86,60 +87,71 @@ pub fn fill_holes(
             .sum();
         sum as f32
     };
-    Zip::indexed(out.axis_iter_mut(Axis(0)))
-        .and(fill_confidence.axis_iter_mut(Axis(0)))
-        .par_for_each(|y, mut out_row, mut conf_row| {
-            // Costs of the valid candidates of the current pixel: (flat index, cost).
-            let mut cand =
-                [(0usize, 0.0f32); (2 * MAX_FILL_RADIUS + 1) * (2 * MAX_FILL_RADIUS + 1)];
-            for x in 0..w {
-                let i = y * w + x;
-                let z = d[i];
-                conf_row[x] = 0;
-                if is_valid_depth(z) {
-                    out_row[x] = z;
-                    continue;
-                }
-                out_row[x] = 0.0;
-                let (y0, y1) = (y.saturating_sub(r), (y + r).min(h - 1));
-                let (x0, x1) = (x.saturating_sub(r), (x + r).min(w - 1));
-                let mut n = 0;
-                let mut best = (f32::INFINITY, 0.0f32); // (cost, depth)
-                for yy in y0..=y1 {
-                    let dy = yy as f32 - y as f32;
-                    for xx in x0..=x1 {
-                        let j = yy * w + xx;
-                        let zz = d[j];
-                        if !is_valid_depth(zz) {
-                            continue;
-                        }
-                        let dx = xx as f32 - x as f32;
-                        let cost = colour_dist2(i, j) * inv_c + (dy * dy + dx * dx) * inv_s;
-                        cand[n] = (j, cost);
-                        n += 1;
-                        if cost < best.0 {
-                            best = (cost, zz);
-                        }
-                    }
-                }
-                if n == 0 {
-                    continue;
-                }
-                let (best_cost, z_ref) = best;
-                let (mut acc, mut wsum) = (0.0f32, 0.0f32);
-                for &(j, cost) in &cand[..n] {
-                    let gap = cost - best_cost;
-                    if gap < MAX_COST_GAP && same_surface(z_ref, d[j]) {
-                        // Relative to the best match, so the weights cannot all underflow.
-                        let wgt = soft_exp_neg(0.5 * gap);
-                        acc += wgt * d[j];
-                        wsum += wgt;
-                    }
-                }
-                out_row[x] = acc / wsum;
-                conf_row[x] = (127.0 * (-best_cost * 0.5).exp()).round().clamp(1.0, 127.0) as u8;
+    // Written without branches on the data where it can be: holes and their edges are
+    // irregular, and mispredicted branches, not arithmetic, were most of this function's cost.
+    let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
+    // The fill of hole `(y, x)`: `(depth, confidence)`, or `None` with no valid pixel in reach.
+    let fill = |y: usize, x: usize| -> Option<(f32, u8)> {
+        // Costs of the window's pixels, the invalid ones +∞: (flat index, cost).
+        let mut cand = [(0usize, 0.0f32); (2 * MAX_FILL_RADIUS + 1) * (2 * MAX_FILL_RADIUS + 1)];
+        let i = y * w + x;
+        let (y0, y1) = (y.saturating_sub(r), (y + r).min(h - 1));
+        let (x0, x1) = (x.saturating_sub(r), (x + r).min(w - 1));
+        let (mut n, mut valid_count) = (0, 0);
+        let mut best = (f32::INFINITY, 0.0f32); // (cost, depth)
+        for yy in y0..=y1 {
+            let dy = yy as f32 - y as f32;
+            for xx in x0..=x1 {
+                let j = yy * w + xx;
+                let zz = d[j];
+                let ok = valid(zz);
+                let dx = xx as f32 - x as f32;
+                let cost = colour_dist2(i, j) * inv_c + (dy * dy + dx * dx) * inv_s;
+                let cost = if ok { cost } else { f32::INFINITY };
+                cand[n] = (j, cost);
+                n += 1;
+                valid_count += usize::from(ok);
+                best = if cost < best.0 { (cost, zz) } else { best };
             }
-        });
+        }
+        if valid_count == 0 {
+            return None;
+        }
+        let (best_cost, z_ref) = best;
+        let (mut acc, mut wsum) = (0.0f32, 0.0f32);
+        for &(j, cost) in &cand[..n] {
+            // An invalid pixel's gap is +∞ (or NaN): never taken.
+            let gap = cost - best_cost;
+            let take = (gap < MAX_COST_GAP) & same_surface(z_ref, d[j]);
+            // Relative to the best match, so the weights cannot all underflow.
+            let wgt = soft_exp_neg(0.5 * gap);
+            acc += if take { wgt * d[j] } else { 0.0 };
+            wsum += if take { wgt } else { 0.0 };
+        }
+        let confidence = (127.0 * (-best_cost * 0.5).exp()).round().clamp(1.0, 127.0) as u8;
+        Some((acc / wsum, confidence))
+    };
+    par_rows2(out, fill_confidence, |y, out_row, conf_row| {
+        let row = &d[y * w..(y + 1) * w];
+        // Measured pixels copied; the holes found 64 at a time as a bit mask and filled.
+        for start in (0..w).step_by(64) {
+            let end = (start + 64).min(w);
+            let mut holes = 0u64;
+            for x in start..end {
+                let z = row[x];
+                let ok = valid(z);
+                (out_row[x], conf_row[x]) = (if ok { z } else { 0.0 }, 0);
+                holes |= u64::from(!ok) << (x - start);
+            }
+            while holes != 0 {
+                let x = start + holes.trailing_zeros() as usize;
+                holes &= holes - 1;
+                if let Some(filled) = fill(y, x) {
+                    (out_row[x], conf_row[x]) = filled;
+                }
+            }
+        }
+    });
 }
 
 #[cfg(test)]
