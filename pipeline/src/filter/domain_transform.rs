@@ -251,8 +251,30 @@ pub fn domain_transform_masked(
 
 /// Copies the rows of `rows` (row-major, `w` wide) into lanes of `tile` (`[x][lane]`),
 /// zeroing the lanes past the last row.
+#[inline(always)]
 fn rows_to_tile(rows: &[f32], tile: &mut [f32], w: usize) {
     let n = rows.len() / w;
+    if n == GROUP_ROWS {
+        // A full group: 4 × 4 blocks (four row loads of four, four tile stores of four), which
+        // the compiler turns into vector shuffles instead of a scalar load and store per value.
+        let whole = w / 4 * 4;
+        for x in (0..whole).step_by(4) {
+            for r in (0..GROUP_ROWS).step_by(4) {
+                let block: [[f32; 4]; 4] =
+                    std::array::from_fn(|i| std::array::from_fn(|k| rows[(r + i) * w + x + k]));
+                for (k, lanes) in transpose4(block).iter().enumerate() {
+                    let t = (x + k) * GROUP_ROWS + r;
+                    tile[t..t + 4].copy_from_slice(lanes);
+                }
+            }
+        }
+        for x in whole..w {
+            for r in 0..GROUP_ROWS {
+                tile[x * GROUP_ROWS + r] = rows[r * w + x];
+            }
+        }
+        return;
+    }
     for (x, lanes) in tile.chunks_exact_mut(GROUP_ROWS).enumerate() {
         for (r, lane) in lanes.iter_mut().enumerate() {
             *lane = if r < n { rows[r * w + x] } else { 0.0 };
@@ -260,8 +282,38 @@ fn rows_to_tile(rows: &[f32], tile: &mut [f32], w: usize) {
     }
 }
 
+/// The transpose of a 4 × 4 block.
+#[inline(always)]
+fn transpose4(b: [[f32; 4]; 4]) -> [[f32; 4]; 4] {
+    std::array::from_fn(|k| std::array::from_fn(|i| b[i][k]))
+}
+
 /// The inverse of [`rows_to_tile`] (padding lanes are dropped).
+#[inline(always)]
 fn tile_to_rows(tile: &[f32], rows: &mut [f32], w: usize) {
+    let n = rows.len() / w;
+    if n == GROUP_ROWS {
+        // 4 × 4 blocks, as in `rows_to_tile`.
+        let whole = w / 4 * 4;
+        for x in (0..whole).step_by(4) {
+            for r in (0..GROUP_ROWS).step_by(4) {
+                let block: [[f32; 4]; 4] = std::array::from_fn(|k| {
+                    let t = (x + k) * GROUP_ROWS + r;
+                    std::array::from_fn(|i| tile[t + i])
+                });
+                for (i, values) in transpose4(block).iter().enumerate() {
+                    let o = (r + i) * w + x;
+                    rows[o..o + 4].copy_from_slice(values);
+                }
+            }
+        }
+        for x in whole..w {
+            for r in 0..GROUP_ROWS {
+                rows[r * w + x] = tile[x * GROUP_ROWS + r];
+            }
+        }
+        return;
+    }
     for (r, row) in rows.chunks_exact_mut(w).enumerate() {
         for (v, lanes) in row.iter_mut().zip(tile.chunks_exact(GROUP_ROWS)) {
             *v = lanes[r];
@@ -270,7 +322,7 @@ fn tile_to_rows(tile: &[f32], rows: &mut [f32], w: usize) {
 }
 
 /// One step of a recursion on `GROUP_ROWS` lanes: `cur += a · (prev − cur)`.
-#[inline]
+#[inline(always)]
 fn recurse_lanes(cur: &mut [f32], prev: &[f32], a: &[f32]) {
     let (cur, prev, a) = (
         &mut cur[..GROUP_ROWS],
@@ -301,30 +353,43 @@ fn horizontal_pass(
         .zip(w_h.par_chunks(tile))
         .zip(tile_num.par_chunks_mut(tile))
         .zip(tile_den.par_chunks_mut(tile))
-        .for_each(|((((num, den), a), tn), tm)| {
-            rows_to_tile(num, tn, w);
-            rows_to_tile(den, tm, w);
-            for x in 1..w {
-                let (prev, cur) = tn.split_at_mut(x * GROUP_ROWS);
-                recurse_lanes(cur, &prev[(x - 1) * GROUP_ROWS..], &a[x * GROUP_ROWS..]);
-                let (prev, cur) = tm.split_at_mut(x * GROUP_ROWS);
-                recurse_lanes(cur, &prev[(x - 1) * GROUP_ROWS..], &a[x * GROUP_ROWS..]);
-            }
-            for x in (0..w - 1).rev() {
-                let a = &a[(x + 1) * GROUP_ROWS..];
-                let (cur, next) = tn.split_at_mut((x + 1) * GROUP_ROWS);
-                recurse_lanes(&mut cur[x * GROUP_ROWS..], next, a);
-                let (cur, next) = tm.split_at_mut((x + 1) * GROUP_ROWS);
-                recurse_lanes(&mut cur[x * GROUP_ROWS..], next, a);
-            }
-            tile_to_rows(tn, num, w);
-            tile_to_rows(tm, den, w);
-        });
+        .for_each(|((((num, den), a), tn), tm)| filter_group(num, den, a, tn, tm, w));
+}
+
+/// One group of [`GROUP_ROWS`] rows of [`horizontal_pass`]: into tiles, both directions of the
+/// recursion, back into rows. Compiled for AVX-512 and AVX2 as well (a tile step is then one or
+/// two vectors instead of four), chosen at run time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+fn filter_group(
+    num: &mut [f32],
+    den: &mut [f32],
+    a: &[f32],
+    tn: &mut [f32],
+    tm: &mut [f32],
+    w: usize,
+) {
+    rows_to_tile(num, tn, w);
+    rows_to_tile(den, tm, w);
+    for x in 1..w {
+        let (prev, cur) = tn.split_at_mut(x * GROUP_ROWS);
+        recurse_lanes(cur, &prev[(x - 1) * GROUP_ROWS..], &a[x * GROUP_ROWS..]);
+        let (prev, cur) = tm.split_at_mut(x * GROUP_ROWS);
+        recurse_lanes(cur, &prev[(x - 1) * GROUP_ROWS..], &a[x * GROUP_ROWS..]);
+    }
+    for x in (0..w - 1).rev() {
+        let a = &a[(x + 1) * GROUP_ROWS..];
+        let (cur, next) = tn.split_at_mut((x + 1) * GROUP_ROWS);
+        recurse_lanes(&mut cur[x * GROUP_ROWS..], next, a);
+        let (cur, next) = tm.split_at_mut((x + 1) * GROUP_ROWS);
+        recurse_lanes(&mut cur[x * GROUP_ROWS..], next, a);
+    }
+    tile_to_rows(tn, num, w);
+    tile_to_rows(tm, den, w);
 }
 
 /// One step of the vertical recursion on a row segment: `cur += a · (prev − cur)`, for both
-/// signals.
-#[inline(always)]
+/// signals. Compiled for AVX-512 and AVX2 as well, chosen at run time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
 fn recurse_row(n: &mut [f32], m: &mut [f32], a: &[f32], prev_n: &[f32], prev_m: &[f32]) {
     let len = n.len();
     let (m, a, prev_n, prev_m) = (&mut m[..len], &a[..len], &prev_n[..len], &prev_m[..len]);
