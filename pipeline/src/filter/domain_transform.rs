@@ -260,9 +260,12 @@ fn rows_to_tile(rows: &[f32], tile: &mut [f32], w: usize) {
         let whole = w / 4 * 4;
         for x in (0..whole).step_by(4) {
             for r in (0..GROUP_ROWS).step_by(4) {
-                let block: [[f32; 4]; 4] =
-                    std::array::from_fn(|i| std::array::from_fn(|k| rows[(r + i) * w + x + k]));
-                for (k, lanes) in transpose4(block).iter().enumerate() {
+                let mut block = [[0.0f32; 4]; 4];
+                for (i, b) in block.iter_mut().enumerate() {
+                    let o = (r + i) * w + x;
+                    b.copy_from_slice(&rows[o..o + 4]);
+                }
+                for (k, lanes) in transpose4(&block).iter().enumerate() {
                     let t = (x + k) * GROUP_ROWS + r;
                     tile[t..t + 4].copy_from_slice(lanes);
                 }
@@ -282,10 +285,15 @@ fn rows_to_tile(rows: &[f32], tile: &mut [f32], w: usize) {
     }
 }
 
-/// The transpose of a 4 × 4 block.
+/// The transpose of a 4 × 4 block (written out: the compiler makes it four shuffles).
 #[inline(always)]
-fn transpose4(b: [[f32; 4]; 4]) -> [[f32; 4]; 4] {
-    std::array::from_fn(|k| std::array::from_fn(|i| b[i][k]))
+fn transpose4(b: &[[f32; 4]; 4]) -> [[f32; 4]; 4] {
+    [
+        [b[0][0], b[1][0], b[2][0], b[3][0]],
+        [b[0][1], b[1][1], b[2][1], b[3][1]],
+        [b[0][2], b[1][2], b[2][2], b[3][2]],
+        [b[0][3], b[1][3], b[2][3], b[3][3]],
+    ]
 }
 
 /// The inverse of [`rows_to_tile`] (padding lanes are dropped).
@@ -297,11 +305,12 @@ fn tile_to_rows(tile: &[f32], rows: &mut [f32], w: usize) {
         let whole = w / 4 * 4;
         for x in (0..whole).step_by(4) {
             for r in (0..GROUP_ROWS).step_by(4) {
-                let block: [[f32; 4]; 4] = std::array::from_fn(|k| {
+                let mut block = [[0.0f32; 4]; 4];
+                for (k, b) in block.iter_mut().enumerate() {
                     let t = (x + k) * GROUP_ROWS + r;
-                    std::array::from_fn(|i| tile[t + i])
-                });
-                for (i, values) in transpose4(block).iter().enumerate() {
+                    b.copy_from_slice(&tile[t..t + 4]);
+                }
+                for (i, values) in transpose4(&block).iter().enumerate() {
                     let o = (r + i) * w + x;
                     rows[o..o + 4].copy_from_slice(values);
                 }
@@ -370,18 +379,29 @@ fn filter_group(
 ) {
     rows_to_tile(num, tn, w);
     rows_to_tile(den, tm, w);
+    // The previous step's lanes are carried in locals (registers), not read back from the
+    // tile just written: the recursion is a chain of dependent steps, and a store-to-load
+    // round trip per step lengthened it.
+    let lanes = |t: &[f32], x: usize| -> [f32; GROUP_ROWS] {
+        t[x * GROUP_ROWS..(x + 1) * GROUP_ROWS]
+            .try_into()
+            .expect("a tile holds GROUP_ROWS lanes per column")
+    };
+    let (mut pn, mut pm) = (lanes(tn, 0), lanes(tm, 0));
     for x in 1..w {
-        let (prev, cur) = tn.split_at_mut(x * GROUP_ROWS);
-        recurse_lanes(cur, &prev[(x - 1) * GROUP_ROWS..], &a[x * GROUP_ROWS..]);
-        let (prev, cur) = tm.split_at_mut(x * GROUP_ROWS);
-        recurse_lanes(cur, &prev[(x - 1) * GROUP_ROWS..], &a[x * GROUP_ROWS..]);
+        let at = x * GROUP_ROWS..(x + 1) * GROUP_ROWS;
+        recurse_lanes(&mut tn[at.clone()], &pn, &a[at.clone()]);
+        recurse_lanes(&mut tm[at.clone()], &pm, &a[at.clone()]);
+        (pn, pm) = (lanes(tn, x), lanes(tm, x));
     }
     for x in (0..w - 1).rev() {
-        let a = &a[(x + 1) * GROUP_ROWS..];
-        let (cur, next) = tn.split_at_mut((x + 1) * GROUP_ROWS);
-        recurse_lanes(&mut cur[x * GROUP_ROWS..], next, a);
-        let (cur, next) = tm.split_at_mut((x + 1) * GROUP_ROWS);
-        recurse_lanes(&mut cur[x * GROUP_ROWS..], next, a);
+        let (at, link) = (
+            x * GROUP_ROWS..(x + 1) * GROUP_ROWS,
+            &a[(x + 1) * GROUP_ROWS..],
+        );
+        recurse_lanes(&mut tn[at.clone()], &pn, link);
+        recurse_lanes(&mut tm[at.clone()], &pm, link);
+        (pn, pm) = (lanes(tn, x), lanes(tm, x));
     }
     tile_to_rows(tn, num, w);
     tile_to_rows(tm, den, w);

@@ -28,19 +28,6 @@ pub fn remove_flying_pixels(depth: ArrayView2<f32>, rel: f32, abs_m: f32, out: A
     let d = depth
         .as_slice()
         .expect("as_standard_layout yields a contiguous array");
-    // Whether `z` lies strictly between `a` and `b` and off both surfaces. Evaluated without
-    // short-circuits: on noisy depth the "between" test is a coin flip, and a mispredicted
-    // branch costs more than the arithmetic.
-    let mixed = |z: f32, tol: f32, a: f32, b: f32| {
-        let (da, db) = (z - a, b - z);
-        (da.abs() > tol)
-            & (db.abs() > tol)
-            & (da * db > 0.0)
-            & is_valid_depth(a)
-            & is_valid_depth(b)
-    };
-    // Whether `z` is valid: `is_valid_depth` without short-circuits (`z > 0` and finite).
-    let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
     par_rows(out, |y, row| {
         let cur = &d[y * w..(y + 1) * w];
         // The general test, for the image border (no vertical or diagonal pair in the first
@@ -80,19 +67,45 @@ pub fn remove_flying_pixels(depth: ArrayView2<f32>, rel: f32, abs_m: f32, out: A
         let (ul, uc, ur) = (&up[..n], &up[1..n + 1], &up[2..]);
         let (cl, cc, cr) = (&cur[..n], &cur[1..n + 1], &cur[2..]);
         let (dl, dc, dr) = (&down[..n], &down[1..n + 1], &down[2..]);
-        let o = &mut row[1..n + 1];
-        for i in 0..n {
-            let z = cc[i];
-            let tol = (rel * z).max(abs_m);
-            let flying = mixed(z, tol, cl[i], cr[i])
-                | mixed(z, tol, uc[i], dc[i])
-                | mixed(z, tol, ul[i], dr[i])
-                | mixed(z, tol, ur[i], dl[i]);
-            o[i] = if valid(z) & !flying { z } else { 0.0 };
-        }
+        let window = [ul, uc, ur, cl, cc, cr, dl, dc, dr];
+        interior_row(window, (rel, abs_m), &mut row[1..n + 1]);
         row[0] = general(0);
         row[w - 1] = general(w - 1);
     });
+}
+
+/// Whether `z` is valid: `is_valid_depth` without short-circuits (`z > 0` and finite).
+#[inline(always)]
+fn valid(z: f32) -> bool {
+    (z > 0.0) & (z < f32::INFINITY)
+}
+
+/// Whether `z` lies strictly between `a` and `b` and off both surfaces (tolerance `tol`).
+/// Evaluated without short-circuits: on noisy depth the "between" test is a coin flip, and a
+/// mispredicted branch costs more than the arithmetic.
+#[inline(always)]
+fn mixed(z: f32, tol: f32, a: f32, b: f32) -> bool {
+    let (da, db) = (z - a, b - z);
+    (da.abs() > tol) & (db.abs() > tol) & (da * db > 0.0) & valid(a) & valid(b)
+}
+
+/// The interior pixels of one row of [`remove_flying_pixels`]: `window` holds the nine shifted
+/// neighbour slices (row-major: up-left … down-right), `out` the row's interior. Branch-free
+/// (on noisy depth the "between" test is a coin flip); compiled for AVX-512 and AVX2 as well,
+/// chosen at run time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+fn interior_row(window: [&[f32]; 9], (rel, abs_m): (f32, f32), out: &mut [f32]) {
+    let n = out.len();
+    let [ul, uc, ur, cl, cc, cr, dl, dc, dr] = window.map(|s| &s[..n]);
+    for i in 0..n {
+        let z = cc[i];
+        let tol = (rel * z).max(abs_m);
+        let flying = mixed(z, tol, cl[i], cr[i])
+            | mixed(z, tol, uc[i], dc[i])
+            | mixed(z, tol, ul[i], dr[i])
+            | mixed(z, tol, ur[i], dl[i]);
+        out[i] = if valid(z) & !flying { z } else { 0.0 };
+    }
 }
 
 #[cfg(test)]

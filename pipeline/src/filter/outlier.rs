@@ -132,37 +132,48 @@ pub fn reject_outliers(
             &down[1..n + 1],
             &down[2..],
         ];
-        let (o_in, f_in) = (&mut out_row[1..n + 1], &mut flag_row[1..n + 1]);
-        for i in 0..n {
-            let mut v = [0.0f32; 9];
-            let mut count = 0u32;
-            for (v, s) in v.iter_mut().zip(window) {
-                let ok = valid(s[i]);
-                count += u32::from(ok);
-                *v = if ok { s[i] } else { f32::INFINITY };
-            }
-            sort9(&mut v);
-            let m = match count {
-                0..=6 => v[2],
-                7..=8 => v[3],
-                _ => v[4],
-            };
-            let centre = window[4][i];
-            let keep = valid(centre);
-            let replace = keep & (count >= MIN_VALID_NEIGHBOURS as u32) & !same_surface(m, centre);
-            o_in[i] = if replace {
-                m
-            } else if keep {
-                centre
-            } else {
-                0.0
-            };
-            f_in[i] = replace;
-        }
+        interior_row(window, &mut out_row[1..n + 1], &mut flag_row[1..n + 1]);
         for x in [0, w - 1] {
             exact(x, &mut out_row[x], &mut flag_row[x]);
         }
     });
+}
+
+/// The interior pixels of one row (see [`reject_outliers`]'s comment on the method): `window`
+/// holds the nine shifted neighbour slices, `out` and `replaced` the row's interior. Compiled
+/// for AVX-512 and AVX2 as well (sixteen or eight pixels' sorting networks side by side), chosen
+/// at run time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+fn interior_row(window: [&[f32]; 9], out: &mut [f32], replaced: &mut [bool]) {
+    let n = out.len();
+    let window = window.map(|s| &s[..n]);
+    let replaced = &mut replaced[..n];
+    for i in 0..n {
+        let mut v = [0.0f32; 9];
+        let mut count = 0u32;
+        for (v, s) in v.iter_mut().zip(window) {
+            let ok = valid(s[i]);
+            count += u32::from(ok);
+            *v = if ok { s[i] } else { f32::INFINITY };
+        }
+        sort9(&mut v);
+        let m = match count {
+            0..=6 => v[2],
+            7..=8 => v[3],
+            _ => v[4],
+        };
+        let centre = window[4][i];
+        let keep = valid(centre);
+        let replace = keep & (count >= MIN_VALID_NEIGHBOURS as u32) & !same_surface(m, centre);
+        out[i] = if replace {
+            m
+        } else if keep {
+            centre
+        } else {
+            0.0
+        };
+        replaced[i] = replace;
+    }
 }
 
 #[cfg(test)]

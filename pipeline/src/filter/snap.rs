@@ -45,65 +45,79 @@ pub fn snap_to_surface(
     let v = value
         .as_slice()
         .expect("as_standard_layout yields a contiguous array");
+    par_rows2(out, snapped, |y, out_row, flag_row| {
+        snap_row((v, r), (h, w), y, radius, out_row, flag_row);
+    });
+}
+
+/// One row `y` of [`snap_to_surface`] (`v` the values, `r` the reference, whole images).
+/// Compiled for AVX-512 and AVX2 as well, chosen at run time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+fn snap_row(
+    (v, r): (&[f32], &[f32]),
+    (h, w): (usize, usize),
+    y: usize,
+    radius: usize,
+    out_row: &mut [f32],
+    flag_row: &mut [bool],
+) {
     // Whether `z` is valid: `is_valid_depth` without short-circuits (`z > 0` and finite).
     let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
-    par_rows2(out, snapped, |y, out_row, flag_row| {
-        let value_row = &v[y * w..(y + 1) * w];
-        let own_row = &r[y * w..(y + 1) * w];
-        // The common case first, branch-free (vectorised): the pixel's own reference is on
-        // the value's surface. Every other valid value is left at 0 here and searched for
-        // below (a kept value is valid, so never 0).
-        for (((o, f), &v), &own) in out_row
-            .iter_mut()
-            .zip(flag_row.iter_mut())
-            .zip(value_row)
-            .zip(own_row)
-        {
-            let keep = valid(v) & valid(own) & same_surface(own, v);
-            (*o, *f) = (if keep { v } else { 0.0 }, false);
-        }
-        let (y0, y1) = (y.saturating_sub(radius), (y + radius).min(h - 1));
-        // Every valid value not kept above: search the window, without branches on the data
-        // (valid and invalid depths mix at random near holes): whether any valid reference is
-        // on the value's surface, and the first (row-major) of the valid ones nearest to it.
-        let search = |x: usize, v: f32| {
-            let (x0, x1) = (x.saturating_sub(radius), (x + radius).min(w - 1));
-            let mut nearest = (f32::INFINITY, 0.0f32);
-            let mut on_surface = false;
-            for yy in y0..=y1 {
-                for &z in &r[yy * w + x0..=yy * w + x1] {
-                    let ok = valid(z);
-                    on_surface |= ok & same_surface(z, v);
-                    let d = if ok { (z - v).abs() } else { f32::INFINITY };
-                    if d < nearest.0 {
-                        nearest = (d, z);
-                    }
+    let value_row = &v[y * w..(y + 1) * w];
+    let own_row = &r[y * w..(y + 1) * w];
+    // The common case first, branch-free (vectorised): the pixel's own reference is on
+    // the value's surface. Every other valid value is left at 0 here and searched for
+    // below (a kept value is valid, so never 0).
+    for (((o, f), &v), &own) in out_row
+        .iter_mut()
+        .zip(flag_row.iter_mut())
+        .zip(value_row)
+        .zip(own_row)
+    {
+        let keep = valid(v) & valid(own) & same_surface(own, v);
+        (*o, *f) = (if keep { v } else { 0.0 }, false);
+    }
+    let (y0, y1) = (y.saturating_sub(radius), (y + radius).min(h - 1));
+    // Every valid value not kept above: search the window, without branches on the data
+    // (valid and invalid depths mix at random near holes): whether any valid reference is
+    // on the value's surface, and the first (row-major) of the valid ones nearest to it.
+    let search = |x: usize, v: f32| {
+        let (x0, x1) = (x.saturating_sub(radius), (x + radius).min(w - 1));
+        let mut nearest = (f32::INFINITY, 0.0f32);
+        let mut on_surface = false;
+        for yy in y0..=y1 {
+            for &z in &r[yy * w + x0..=yy * w + x1] {
+                let ok = valid(z);
+                on_surface |= ok & same_surface(z, v);
+                let d = if ok { (z - v).abs() } else { f32::INFINITY };
+                if d < nearest.0 {
+                    nearest = (d, z);
                 }
             }
-            if on_surface {
-                (v, false)
-            } else if nearest.0.is_finite() {
-                (nearest.1, true)
-            } else {
-                (0.0, false)
-            }
-        };
-        // The pixels to search are found 64 at a time as a bit mask: a branch per pixel on
-        // whether it needs the search was mispredicted often enough to cost more than the
-        // searches themselves.
-        for start in (0..w).step_by(64) {
-            let end = (start + 64).min(w);
-            let mut pending = (start..end).fold(0u64, |bits, x| {
-                let needs_search = (out_row[x] == 0.0) & valid(value_row[x]);
-                bits | (u64::from(needs_search) << (x - start))
-            });
-            while pending != 0 {
-                let x = start + pending.trailing_zeros() as usize;
-                pending &= pending - 1;
-                (out_row[x], flag_row[x]) = search(x, value_row[x]);
-            }
         }
-    });
+        if on_surface {
+            (v, false)
+        } else if nearest.0.is_finite() {
+            (nearest.1, true)
+        } else {
+            (0.0, false)
+        }
+    };
+    // The pixels to search are found 64 at a time as a bit mask: a branch per pixel on
+    // whether it needs the search was mispredicted often enough to cost more than the
+    // searches themselves.
+    for start in (0..w).step_by(64) {
+        let end = (start + 64).min(w);
+        let mut pending = (start..end).fold(0u64, |bits, x| {
+            let needs_search = (out_row[x] == 0.0) & valid(value_row[x]);
+            bits | (u64::from(needs_search) << (x - start))
+        });
+        while pending != 0 {
+            let x = start + pending.trailing_zeros() as usize;
+            pending &= pending - 1;
+            (out_row[x], flag_row[x]) = search(x, value_row[x]);
+        }
+    }
 }
 
 #[cfg(test)]
