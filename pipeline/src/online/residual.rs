@@ -256,14 +256,7 @@ impl EdgeCheck {
         self.luma
             .par_chunks_mut(w)
             .zip(rgb.par_chunks(3 * w))
-            .for_each(|(luma, rgb)| {
-                for (l, p) in luma.iter_mut().zip(rgb.chunks_exact(3)) {
-                    *l = (0.299 * f32::from(p[0])
-                        + 0.587 * f32::from(p[1])
-                        + 0.114 * f32::from(p[2]))
-                        / 255.0;
-                }
-            });
+            .for_each(|(luma, rgb)| luma_row(rgb, luma));
         let luma = &self.luma;
         // Rows in parallel, on flat slices; the border rows and columns stay invalid.
         self.luma_gradient
@@ -288,47 +281,71 @@ impl EdgeCheck {
                     row(amplitude, w, y + 1),
                 );
                 let (l0, l1, l2) = (row(luma, w, y - 1), row(luma, w, y), row(luma, w, y + 1));
-                // sqrt, not hypot: no overflow to guard against here, and hypot was 4 % of
-                // a VGA frame.
-                let magnitude = |gx: f32, gy: f32| (gx * gx + gy * gy).sqrt();
-                // `is_valid_depth` without short-circuits; the loop is written with selects
-                // (every pixel computes both gradients, validity picks them) so that it
-                // vectorises: holes make branches on validity unpredictable.
-                let valid_depth = |z: f32| (z > 0.0) & (z < f32::INFINITY);
-                if w < 3 {
-                    return;
-                }
-                // Equal-length slices of the neighbours (left, right, up, down, centre), so
-                // that the loop has no bounds checks left to stop it vectorising.
-                let n = w - 2;
-                fn centre(r: &[f32]) -> &[f32] {
-                    &r[1..r.len() - 1]
-                }
-                fn left(r: &[f32]) -> &[f32] {
-                    &r[..r.len() - 2]
-                }
-                fn right(r: &[f32]) -> &[f32] {
-                    &r[2..]
-                }
-                let (dc, dl, dr, du, dd) =
-                    (centre(d1), left(d1), right(d1), centre(d0), centre(d2));
-                let (al, ar, au, ad) = (left(a1), right(a1), centre(a0), centre(a2));
-                let (ll, lr, lu, ld) = (left(l1), right(l1), centre(l0), centre(l2));
-                let (ag, lg, valid) = (&mut ag[1..=n], &mut lg[1..=n], &mut valid[1..=n]);
-                for i in 0..n {
-                    let ok = valid_depth(dc[i])
-                        & valid_depth(du[i])
-                        & valid_depth(dd[i])
-                        & valid_depth(dl[i])
-                        & valid_depth(dr[i]);
-                    let ga = magnitude(ar[i] - al[i], ad[i] - au[i]);
-                    let gl = magnitude(lr[i] - ll[i], ld[i] - lu[i]);
-                    let ok = ok & ga.is_finite();
-                    ag[i] = if ok { ga } else { 0.0 };
-                    lg[i] = if ok { gl } else { 0.0 };
-                    valid[i] = ok;
-                }
+                gradient_row([d0, d1, d2], [a0, a1, a2], [l0, l1, l2], ag, lg, valid);
             });
+    }
+}
+
+/// Luma (`/255`) of one row of interleaved RGB. Compiled for AVX-512 and AVX2 as well,
+/// chosen at run time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl", "x86_64+avx2"))]
+fn luma_row(rgb: &[u8], luma: &mut [f32]) {
+    for (l, p) in luma.iter_mut().zip(rgb.chunks_exact(3)) {
+        *l = (0.299 * f32::from(p[0]) + 0.587 * f32::from(p[1]) + 0.114 * f32::from(p[2])) / 255.0;
+    }
+}
+
+/// The gradient magnitudes of the amplitude and the luma at the interior pixels of one row, and
+/// where both are defined (the pixel and its 4 neighbours have valid depth), from the rows
+/// above, at and below (`[y − 1, y, y + 1]`) of the depth, amplitude and luma. Compiled for
+/// AVX-512 and AVX2 as well, chosen at run time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+fn gradient_row(
+    [d0, d1, d2]: [&[f32]; 3],
+    [a0, a1, a2]: [&[f32]; 3],
+    [l0, l1, l2]: [&[f32]; 3],
+    ag: &mut [f32],
+    lg: &mut [f32],
+    valid: &mut [bool],
+) {
+    let w = d1.len();
+    if w < 3 {
+        return;
+    }
+    // sqrt, not hypot: no overflow to guard against here, and hypot was 4 % of a VGA frame.
+    let magnitude = |gx: f32, gy: f32| (gx * gx + gy * gy).sqrt();
+    // `is_valid_depth` without short-circuits; the loop is written with selects (every pixel
+    // computes both gradients, validity picks them) so that it vectorises: holes make branches
+    // on validity unpredictable.
+    let valid_depth = |z: f32| (z > 0.0) & (z < f32::INFINITY);
+    // Equal-length slices of the neighbours (left, right, up, down, centre), so that the loop
+    // has no bounds checks left to stop it vectorising.
+    let n = w - 2;
+    fn centre(r: &[f32]) -> &[f32] {
+        &r[1..r.len() - 1]
+    }
+    fn left(r: &[f32]) -> &[f32] {
+        &r[..r.len() - 2]
+    }
+    fn right(r: &[f32]) -> &[f32] {
+        &r[2..]
+    }
+    let (dc, dl, dr, du, dd) = (centre(d1), left(d1), right(d1), centre(d0), centre(d2));
+    let (al, ar, au, ad) = (left(a1), right(a1), centre(a0), centre(a2));
+    let (ll, lr, lu, ld) = (left(l1), right(l1), centre(l0), centre(l2));
+    let (ag, lg, valid) = (&mut ag[1..=n], &mut lg[1..=n], &mut valid[1..=n]);
+    for i in 0..n {
+        let ok = valid_depth(dc[i])
+            & valid_depth(du[i])
+            & valid_depth(dd[i])
+            & valid_depth(dl[i])
+            & valid_depth(dr[i]);
+        let ga = magnitude(ar[i] - al[i], ad[i] - au[i]);
+        let gl = magnitude(lr[i] - ll[i], ld[i] - lu[i]);
+        let ok = ok & ga.is_finite();
+        ag[i] = if ok { ga } else { 0.0 };
+        lg[i] = if ok { gl } else { 0.0 };
+        valid[i] = ok;
     }
 }
 
