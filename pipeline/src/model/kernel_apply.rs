@@ -284,12 +284,6 @@ struct RowScratch {
     full: Vec<f32>,
     /// The three depth rows around the output row, normalised, edge-replicated: `3 × (w + 2)`.
     pad: Vec<f32>,
-    /// Softmax arguments of the 9 neighbours, `9 × w`.
-    args: Vec<f32>,
-    amax: Vec<f32>,
-    sharp: Vec<f32>,
-    sum_e: Vec<f32>,
-    sum_en: Vec<f32>,
 }
 
 impl RowScratch {
@@ -298,14 +292,12 @@ impl RowScratch {
             low: vec![0.0; w4],
             full: vec![0.0; GATED_CHANNELS * w],
             pad: vec![0.0; 3 * (w + 2)],
-            args: vec![0.0; 9 * w],
-            amax: vec![0.0; w],
-            sharp: vec![0.0; w],
-            sum_e: vec![0.0; w],
-            sum_en: vec![0.0; w],
         }
     }
 }
+
+/// Output pixels whose softmax [`gated_row`] computes together.
+const TAIL_CHUNK: usize = 64;
 
 /// One output row, written as loops over the row's pixels (structure of arrays) so that the
 /// compiler vectorises them; `exp_fast` is branch-free for the same reason.
@@ -340,55 +332,63 @@ fn gated_row(
         dst[0] = dst[1];
         dst[w + 1] = dst[w];
     }
-    let centre = &sc.pad[(w + 2) + 1..(w + 2) + 1 + w];
-    for (s, m) in sc.sharp.iter_mut().zip(&sc.full[11 * w..12 * w]) {
-        *s = k.range_scale * exp_fast(*m);
-    }
-    sc.amax.fill(f32::NEG_INFINITY);
-    for i in 0..9 {
-        let (dy, dx) = (i / 3, i % 3);
-        let nb = &sc.pad[dy * (w + 2) + dx..dy * (w + 2) + dx + w];
-        let logits = &sc.full[i * w..(i + 1) * w];
-        let args = &mut sc.args[i * w..(i + 1) * w];
-        for x in 0..w {
-            let v = nb[x];
-            let a = logits[x] - sc.sharp[x] * (v - centre[x]).abs();
-            // Invalid neighbours (depth 0) get no weight at all.
-            let a = if v > 0.0 { a } else { f32::NEG_INFINITY };
-            args[x] = a;
-            // A compare, not f32::max: it vectorises (max's NaN rule does not). A NaN logit
-            // still reaches the result through exp and is caught there.
-            if a > sc.amax[x] {
-                sc.amax[x] = a;
+    // The rest in chunks of TAIL_CHUNK pixels, whose softmax arguments and sums stay in the
+    // core's L1 cache (whole rows of them did not).
+    for c0 in (0..w).step_by(TAIL_CHUNK) {
+        let n = TAIL_CHUNK.min(w - c0);
+        let centre = &sc.pad[(w + 2) + 1 + c0..][..n];
+        let (mut sharp, mut amax) = ([0.0f32; TAIL_CHUNK], [f32::NEG_INFINITY; TAIL_CHUNK]);
+        let (sharp, amax) = (&mut sharp[..n], &mut amax[..n]);
+        for (s, m) in sharp.iter_mut().zip(&sc.full[11 * w + c0..][..n]) {
+            *s = k.range_scale * exp_fast(*m);
+        }
+        let mut args = [[0.0f32; TAIL_CHUNK]; 9];
+        for (i, args) in args.iter_mut().enumerate() {
+            let (dy, dx) = (i / 3, i % 3);
+            let nb = &sc.pad[dy * (w + 2) + dx + c0..][..n];
+            let logits = &sc.full[i * w + c0..][..n];
+            let args = &mut args[..n];
+            for x in 0..n {
+                let v = nb[x];
+                let a = logits[x] - sharp[x] * (v - centre[x]).abs();
+                // Invalid neighbours (depth 0) get no weight at all.
+                let a = if v > 0.0 { a } else { f32::NEG_INFINITY };
+                args[x] = a;
+                // A compare, not f32::max: it vectorises (max's NaN rule does not). A NaN
+                // logit still reaches the result through exp and is caught there.
+                if a > amax[x] {
+                    amax[x] = a;
+                }
             }
         }
-    }
-    sc.sum_e.fill(0.0);
-    sc.sum_en.fill(0.0);
-    for i in 0..9 {
-        let (dy, dx) = (i / 3, i % 3);
-        let nb = &sc.pad[dy * (w + 2) + dx..dy * (w + 2) + dx + w];
-        let args = &sc.args[i * w..(i + 1) * w];
-        for x in 0..w {
-            let e = exp_fast(args[x] - sc.amax[x]);
-            let e = if nb[x] > 0.0 { e } else { 0.0 };
-            sc.sum_e[x] += e;
-            sc.sum_en[x] += e * nb[x];
+        let (mut sum_e, mut sum_en) = ([0.0f32; TAIL_CHUNK], [0.0f32; TAIL_CHUNK]);
+        let (sum_e, sum_en) = (&mut sum_e[..n], &mut sum_en[..n]);
+        for (i, args) in args.iter().enumerate() {
+            let (dy, dx) = (i / 3, i % 3);
+            let nb = &sc.pad[dy * (w + 2) + dx + c0..][..n];
+            let args = &args[..n];
+            for x in 0..n {
+                let e = exp_fast(args[x] - amax[x]);
+                let e = if nb[x] > 0.0 { e } else { 0.0 };
+                sum_e[x] += e;
+                sum_en[x] += e * nb[x];
+            }
         }
-    }
-    let (bias, gate) = (&sc.full[9 * w..10 * w], &sc.full[10 * w..11 * w]);
-    for x in 0..w {
-        let d = centre[x];
-        let filtered = sc.sum_en[x] / sc.sum_e[x];
-        let r =
-            (d + sigmoid(gate[x]) * (filtered + k.max_bias * tanh(bias[x]) - d)) * k.max_depth_m;
-        out[x] = if d.is_nan() || d <= 0.0 {
-            0.0
-        } else if r.is_finite() {
-            r
-        } else {
-            d * k.max_depth_m
-        };
+        let (bias, gate) = (&sc.full[9 * w + c0..][..n], &sc.full[10 * w + c0..][..n]);
+        let out = &mut out[c0..c0 + n];
+        for x in 0..n {
+            let d = centre[x];
+            let filtered = sum_en[x] / sum_e[x];
+            let r = (d + sigmoid(gate[x]) * (filtered + k.max_bias * tanh(bias[x]) - d))
+                * k.max_depth_m;
+            out[x] = if d.is_nan() || d <= 0.0 {
+                0.0
+            } else if r.is_finite() {
+                r
+            } else {
+                d * k.max_depth_m
+            };
+        }
     }
 }
 
