@@ -274,6 +274,53 @@ fn band_taps(
     }
 }
 
+/// Step 1 of the depth-only splat for one run of a source row (`depth` the run's values, its
+/// first pixel at `(y, x_first)`): each pixel's [`Cell`] (what [`landing`] and [`splat_cell`]
+/// give, `NO_CELL` with zero weights where they give `None`), and the run's span of top tap
+/// rows (`(i32::MAX, i32::MIN)` without a cell). Written with selects and a conversion that
+/// cannot saturate, so that the run vectorises; compiled for AVX-512 and AVX2 as well, chosen
+/// at run time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+fn prepare_run(
+    p: &Calibration,
+    y: usize,
+    x_first: usize,
+    depth: &[f32],
+    cells: &mut [Cell],
+) -> (i32, i32) {
+    let n = cells.len().min(depth.len());
+    let (mut lo, mut hi) = (i32::MAX, i32::MIN);
+    for (i, (c, &z)) in cells[..n].iter_mut().zip(&depth[..n]).enumerate() {
+        let (fu, fv) = p.flow_formula(z);
+        let (tx, ty) = ((x_first + i) as f32 - fu, y as f32 - fv);
+        // `landing`'s and `splat_cell`'s tests: a valid depth, a finite point within 1e9 px.
+        let ok = (z > 0.0) & (z < f32::INFINITY) & (tx.abs() < 1e9) & (ty.abs() < 1e9);
+        let (tx, ty) = if ok { (tx, ty) } else { (0.0, 0.0) };
+        // SAFETY: `tx` and `ty` are finite and below 1e9 < 2³¹ in magnitude here, so their
+        // truncations are i32 values (`to_int_unchecked`'s requirement). `as i32` would
+        // saturate, which the compiler does one lane at a time.
+        let (ix, iy) = unsafe { (tx.to_int_unchecked::<i32>(), ty.to_int_unchecked::<i32>()) };
+        // Floor from truncation, as `splat_cell` computes it.
+        let x0 = if ix as f32 > tx { ix - 1 } else { ix };
+        let y0 = if iy as f32 > ty { iy - 1 } else { iy };
+        let (fx, fy) = (tx - x0 as f32, ty - y0 as f32);
+        let wts = [
+            (1.0 - fx) * (1.0 - fy),
+            fx * (1.0 - fy),
+            (1.0 - fx) * fy,
+            fx * fy,
+        ];
+        *c = Cell {
+            x0: if ok { x0 } else { 0 },
+            y0: if ok { y0 } else { NO_CELL },
+            wts: if ok { wts } else { [0.0; 4] },
+        };
+        lo = lo.min(if ok { y0 } else { i32::MAX });
+        hi = hi.max(if ok { y0 } else { i32::MIN });
+    }
+    (lo, hi)
+}
+
 /// Where the depth-only splat also writes the flow of its output: the `u` and `v` planes
 /// (row-major) and the flow for pixels left invalid (`None`: 0).
 pub(crate) type FlowOut<'a> = (&'a mut [f32], &'a mut [f32], Option<(f32, f32)>);
@@ -307,24 +354,10 @@ impl SplatScratch {
             .zip(depth.axis_iter(Axis(0)).into_par_iter())
             .enumerate()
             .for_each(|(y, (((cells, src), spans), row))| {
-                spans.fill((i32::MAX, i32::MIN));
-                for (x, ((c, s), &z)) in cells.iter_mut().zip(src.iter_mut()).zip(row).enumerate() {
-                    *s = z;
-                    let cell = landing(&p, y, x, z).and_then(|(tx, ty)| splat_cell(tx, ty));
-                    *c = match cell {
-                        // splat_cell's corners come from i32 (|t| < 1e9).
-                        Some((x0, y0, wts)) => {
-                            let (x0, y0) = (x0 as i32, y0 as i32);
-                            let (lo, hi) = &mut spans[x / SPAN_CHUNK];
-                            *lo = (*lo).min(y0);
-                            *hi = (*hi).max(y0);
-                            Cell { x0, y0, wts }
-                        }
-                        None => Cell {
-                            y0: NO_CELL,
-                            ..Cell::default()
-                        },
-                    };
+                src.iter_mut().zip(row).for_each(|(s, &z)| *s = z);
+                let runs = cells.chunks_mut(SPAN_CHUNK).zip(src.chunks(SPAN_CHUNK));
+                for (k, ((cells, src), span)) in runs.zip(spans.iter_mut()).enumerate() {
+                    *span = prepare_run(&p, y, k * SPAN_CHUNK, src, cells);
                 }
             });
     }
