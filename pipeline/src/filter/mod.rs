@@ -287,41 +287,15 @@ impl ClassicalRefiner {
             slice(&s.flying_snapped),
             slice(&s.outlier_replaced),
         );
-        // Written with selects (every pixel computes every case; validity and the flags pick
-        // one) so that the loop vectorises: holes make the branches unpredictable.
-        let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
         par_rows2(out_depth, out_confidence, |y, out_row, conf_row| {
             let row = y * w..(y + 1) * w;
-            let (filled, surfaced, measured) = (
+            let depths = [
                 &filled[row.clone()],
                 &surfaced[row.clone()],
                 &measured[row.clone()],
-            );
-            let (fill_confidence, flying_snapped, outlier_replaced) = (
-                &fill_confidence[row.clone()],
-                &flying_snapped[row.clone()],
-                &outlier_replaced[row],
-            );
-            for (x, (o, c)) in out_row.iter_mut().zip(conf_row.iter_mut()).enumerate() {
-                let (d, z, measured) = (filled[x], surfaced[x], measured[x]);
-                let ok = valid(d) & valid(z);
-                let replaced = flying_snapped[x] | outlier_replaced[x];
-                let fc = match fill_confidence[x] {
-                    0 if replaced => REPLACED_CONFIDENCE,
-                    fc => fc,
-                };
-                // Measured here (used where fc = 0): lower the larger the smoothing's correction.
-                let change = (z - measured).abs() / surface_tolerance(measured);
-                let smoothed = 255 - round_small(127.0 * change.min(1.0));
-                *o = if ok { z } else { 0.0 };
-                *c = if !ok {
-                    0
-                } else if fc > 0 {
-                    fc
-                } else {
-                    smoothed
-                };
-            }
+            ];
+            let flags = [&flying_snapped[row.clone()], &outlier_replaced[row.clone()]];
+            output_row(depths, &fill_confidence[row], flags, out_row, conf_row);
         });
     }
 
@@ -335,6 +309,42 @@ impl ClassicalRefiner {
         let mut conf = Array2::zeros(depth.dim());
         self.refine_into(depth, rgb, out.view_mut(), conf.view_mut());
         (out, conf)
+    }
+}
+
+/// One row of [`ClassicalRefiner::refine_into`]'s output and confidence from the stages'
+/// results (`[filled, surfaced, measured]` depths, the fill confidence, the
+/// `[flying_snapped, outlier_replaced]` flags). Written with selects (every pixel computes
+/// every case; validity and the flags pick one) so that the loop vectorises, as holes make the
+/// branches unpredictable; compiled for AVX-512 and AVX2 as well, chosen at run time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl", "x86_64+avx2"))]
+fn output_row(
+    [filled, surfaced, measured]: [&[f32]; 3],
+    fill_confidence: &[u8],
+    [flying_snapped, outlier_replaced]: [&[bool]; 2],
+    out: &mut [f32],
+    confidence: &mut [u8],
+) {
+    let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
+    for (x, (o, c)) in out.iter_mut().zip(confidence.iter_mut()).enumerate() {
+        let (d, z, measured) = (filled[x], surfaced[x], measured[x]);
+        let ok = valid(d) & valid(z);
+        let replaced = flying_snapped[x] | outlier_replaced[x];
+        let fc = match fill_confidence[x] {
+            0 if replaced => REPLACED_CONFIDENCE,
+            fc => fc,
+        };
+        // Measured here (used where fc = 0): lower the larger the smoothing's correction.
+        let change = (z - measured).abs() / surface_tolerance(measured);
+        let smoothed = 255 - round_small(127.0 * change.min(1.0));
+        *o = if ok { z } else { 0.0 };
+        *c = if !ok {
+            0
+        } else if fc > 0 {
+            fc
+        } else {
+            smoothed
+        };
     }
 }
 
