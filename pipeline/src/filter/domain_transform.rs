@@ -255,32 +255,57 @@ pub fn domain_transform_masked(
 fn rows_to_tile(rows: &[f32], tile: &mut [f32], w: usize) {
     let n = rows.len() / w;
     if n == GROUP_ROWS {
-        // A full group: 4 × 4 blocks (four row loads of four, four tile stores of four), which
-        // the compiler turns into vector shuffles instead of a scalar load and store per value.
-        let whole = w / 4 * 4;
-        for x in (0..whole).step_by(4) {
-            for r in (0..GROUP_ROWS).step_by(4) {
-                let mut block = [[0.0f32; 4]; 4];
-                for (i, b) in block.iter_mut().enumerate() {
-                    let o = (r + i) * w + x;
-                    b.copy_from_slice(&rows[o..o + 4]);
-                }
-                for (k, lanes) in transpose4(&block).iter().enumerate() {
-                    let t = (x + k) * GROUP_ROWS + r;
-                    tile[t..t + 4].copy_from_slice(lanes);
-                }
-            }
-        }
-        for x in whole..w {
-            for r in 0..GROUP_ROWS {
-                tile[x * GROUP_ROWS + r] = rows[r * w + x];
-            }
-        }
-        return;
+        return transpose(rows, (GROUP_ROWS, w), tile);
     }
     for (x, lanes) in tile.chunks_exact_mut(GROUP_ROWS).enumerate() {
         for (r, lane) in lanes.iter_mut().enumerate() {
             *lane = if r < n { rows[r * w + x] } else { 0.0 };
+        }
+    }
+}
+
+/// The inverse of [`rows_to_tile`] (padding lanes are dropped).
+#[inline(always)]
+fn tile_to_rows(tile: &[f32], rows: &mut [f32], w: usize) {
+    let n = rows.len() / w;
+    if n == GROUP_ROWS {
+        return transpose(tile, (w, GROUP_ROWS), rows);
+    }
+    for (r, row) in rows.chunks_exact_mut(w).enumerate() {
+        for (v, lanes) in row.iter_mut().zip(tile.chunks_exact(GROUP_ROWS)) {
+            *v = lanes[r];
+        }
+    }
+}
+
+/// Writes the transpose of the row-major `(rows, cols)` matrix `src` into `dst` (row-major
+/// `(cols, rows)`), in 4 × 4 blocks (four loads of four, four stores of four), which the
+/// compiler turns into vector shuffles instead of a scalar load and store per value.
+#[inline(always)]
+fn transpose(src: &[f32], (rows, cols): (usize, usize), dst: &mut [f32]) {
+    let (whole_r, whole_c) = (rows / 4 * 4, cols / 4 * 4);
+    for r in (0..whole_r).step_by(4) {
+        for c in (0..whole_c).step_by(4) {
+            let mut block = [[0.0f32; 4]; 4];
+            for (i, b) in block.iter_mut().enumerate() {
+                let o = (r + i) * cols + c;
+                b.copy_from_slice(&src[o..o + 4]);
+            }
+            for (k, t) in transpose4(&block).iter().enumerate() {
+                let o = (c + k) * rows + r;
+                dst[o..o + 4].copy_from_slice(t);
+            }
+        }
+    }
+    // The columns past the last whole block, then the rows past it.
+    for r in 0..whole_r {
+        for c in whole_c..cols {
+            dst[c * rows + r] = src[r * cols + c];
+        }
+    }
+    for r in whole_r..rows {
+        for c in 0..cols {
+            dst[c * rows + r] = src[r * cols + c];
         }
     }
 }
@@ -294,40 +319,6 @@ fn transpose4(b: &[[f32; 4]; 4]) -> [[f32; 4]; 4] {
         [b[0][2], b[1][2], b[2][2], b[3][2]],
         [b[0][3], b[1][3], b[2][3], b[3][3]],
     ]
-}
-
-/// The inverse of [`rows_to_tile`] (padding lanes are dropped).
-#[inline(always)]
-fn tile_to_rows(tile: &[f32], rows: &mut [f32], w: usize) {
-    let n = rows.len() / w;
-    if n == GROUP_ROWS {
-        // 4 × 4 blocks, as in `rows_to_tile`.
-        let whole = w / 4 * 4;
-        for x in (0..whole).step_by(4) {
-            for r in (0..GROUP_ROWS).step_by(4) {
-                let mut block = [[0.0f32; 4]; 4];
-                for (k, b) in block.iter_mut().enumerate() {
-                    let t = (x + k) * GROUP_ROWS + r;
-                    b.copy_from_slice(&tile[t..t + 4]);
-                }
-                for (i, values) in transpose4(&block).iter().enumerate() {
-                    let o = (r + i) * w + x;
-                    rows[o..o + 4].copy_from_slice(values);
-                }
-            }
-        }
-        for x in whole..w {
-            for r in 0..GROUP_ROWS {
-                rows[r * w + x] = tile[x * GROUP_ROWS + r];
-            }
-        }
-        return;
-    }
-    for (r, row) in rows.chunks_exact_mut(w).enumerate() {
-        for (v, lanes) in row.iter_mut().zip(tile.chunks_exact(GROUP_ROWS)) {
-            *v = lanes[r];
-        }
-    }
 }
 
 /// One step of a recursion on `GROUP_ROWS` lanes: `cur += a · (prev − cur)`.
