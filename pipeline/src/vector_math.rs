@@ -1,7 +1,8 @@
-//! Scalar maths written so that a loop over pixels vectorises: the standard library's `exp`
-//! is a call per value, and a float-to-integer `as` conversion (saturating, NaN → 0) was
-//! converted one lane at a time. Each function documents how its result relates to the exact
-//! one.
+//! Pieces for loops over pixels that vectorise: scalar maths (the standard library's `exp` is
+//! a call per value, and a float-to-integer `as` conversion, saturating with NaN → 0, was
+//! converted one lane at a time; each function documents how its result relates to the exact
+//! one), and the equal-length neighbour slices of a 3 × 3 window, over which a loop has no
+//! bounds checks left.
 
 /// `e^x` to about 10⁻⁶ relative error for `x` in `[−87, 88]` (clamped outside): range
 /// reduction to `2^n · e^g`, `|g| ≤ ln2/2`, and a degree-6 Taylor polynomial.
@@ -45,6 +46,33 @@ pub(crate) fn floor_small(c: f32) -> u32 {
     const MAGIC: f32 = 12_582_912.0;
     let r = (c + MAGIC).to_bits().wrapping_sub(MAGIC.to_bits());
     r - u32::from(r as f32 > c)
+}
+
+/// The nine neighbours of the interior pixels of a row as equal-length slices, row-major (up-left,
+/// up, up-right, left, centre, right, down-left, down, down-right): `rows` are the rows above,
+/// at and below, and pixel `i` of each slice belongs to column `i + 1`. Of length `w − 2` for
+/// the shortest row's `w` (empty below 3).
+#[inline(always)]
+pub(crate) fn window3x3<'a>(rows: [&'a [f32]; 3]) -> [&'a [f32]; 9] {
+    let n = rows
+        .iter()
+        .map(|r| r.len())
+        .min()
+        .unwrap_or(0)
+        .saturating_sub(2);
+    let [up, centre, down] = rows.map(|r| &r[..(n + 2).min(r.len())]);
+    let shifted = |r: &'a [f32], dx: usize| &r[dx..dx + n];
+    [
+        shifted(up, 0),
+        shifted(up, 1),
+        shifted(up, 2),
+        shifted(centre, 0),
+        shifted(centre, 1),
+        shifted(centre, 2),
+        shifted(down, 0),
+        shifted(down, 1),
+        shifted(down, 2),
+    ]
 }
 
 #[cfg(test)]
@@ -123,5 +151,26 @@ mod tests {
         {
             assert_eq!(floor_small(c), c.floor() as u32, "c = {c}");
         }
+    }
+
+    #[test]
+    fn window3x3_is_the_neighbourhood_of_each_interior_pixel() {
+        let rows: [Vec<f32>; 3] =
+            std::array::from_fn(|r| (0..6).map(|x| (10 * r + x) as f32).collect());
+        let window = window3x3([&rows[0], &rows[1], &rows[2]]);
+        for i in 0..4 {
+            let expected: Vec<f32> = (0..9).map(|k| rows[k / 3][i + 1 + k % 3 - 1]).collect();
+            let got: Vec<f32> = window.iter().map(|s| s[i]).collect();
+            assert_eq!(got, expected, "column {}", i + 1);
+        }
+        assert!(window.iter().all(|s| s.len() == 4));
+        // The shortest row sets the length; below three columns there is no interior.
+        let short = [0.0f32; 5];
+        assert!(window3x3([&rows[0], &short, &rows[2]])
+            .iter()
+            .all(|s| s.len() == 3));
+        assert!(window3x3([&[1.0, 2.0], &[3.0, 4.0], &[5.0, 6.0]])
+            .iter()
+            .all(|s| s.is_empty()));
     }
 }

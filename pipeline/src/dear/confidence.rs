@@ -22,8 +22,8 @@
 use ndarray::{ArrayView2, ArrayViewMut2, Axis, Zip};
 use rayon::prelude::*;
 
-use crate::geometry::surface::{is_valid_depth, surface_tolerance};
-use crate::vector_math::{exp_fast, floor_small};
+use crate::geometry::surface::{is_valid_depth, is_valid_depth_branchless, surface_tolerance};
+use crate::vector_math::{exp_fast, floor_small, window3x3};
 
 /// Writes the confidence of `refined` given the refinement input `warped` into `out`.
 ///
@@ -154,10 +154,9 @@ const ROUNDING_MARGIN: f32 = 1e-3;
 fn interior_confidence(centre: &[f32], refined: &[f32], support: &mut [u8], out: &mut [u8]) {
     let n = out.len();
     let (centre, refined, support) = (&centre[..n], &refined[..n], &mut support[..n]);
-    let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
     for i in 0..n {
         let (z, r) = (centre[i], refined[i]);
-        let ok = valid(z) & valid(r);
+        let ok = is_valid_depth_branchless(z) & is_valid_depth_branchless(r);
         let tol = surface_tolerance(z);
         let agreement = exp_fast(-(r - z).abs() / tol);
         let c = 255.0 * f32::from(support[i]) / 9.0 * agreement;
@@ -181,13 +180,6 @@ fn on_surface(z: f32, tol: f32, q: f32) -> u32 {
     u32::from((q > 0.0) & q.is_finite() & ((q - z).abs() <= tol))
 }
 
-/// `r[..n]`, `r[1..n + 1]` and `r[2..n + 2]`.
-#[inline(always)]
-fn shifted(r: &[f32], n: usize) -> (&[f32], &[f32], &[f32]) {
-    let r = &r[..n + 2];
-    (&r[..n], &r[1..n + 1], &r[2..n + 2])
-}
-
 /// The 3×3 support of pixels `1..w−1` of the centre row (`out[i]` for column `i + 1`), from
 /// the rows above and below: every neighbour exists. Written over equal-length shifted slices
 /// so that the loop has no bounds checks and vectorises; an invalid centre gets a count that
@@ -195,9 +187,7 @@ fn shifted(r: &[f32], n: usize) -> (&[f32], &[f32], &[f32]) {
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl", "x86_64+avx2"))]
 fn interior_support(above: &[f32], centre: &[f32], below: &[f32], out: &mut [u8]) {
     let n = out.len();
-    let (a0, a1, a2) = shifted(above, n);
-    let (c0, c1, c2) = shifted(centre, n);
-    let (b0, b1, b2) = shifted(below, n);
+    let [a0, a1, a2, c0, c1, c2, b0, b1, b2] = window3x3([above, centre, below]).map(|s| &s[..n]);
     for i in 0..n {
         let z = c1[i];
         let tol = surface_tolerance(z);

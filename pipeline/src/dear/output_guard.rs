@@ -18,7 +18,7 @@
 
 use ndarray::{ArrayView2, ArrayViewMut2};
 
-use crate::geometry::surface::is_valid_depth;
+use crate::geometry::surface::{is_valid_depth, is_valid_depth_branchless};
 
 /// Bounds on a refinement's output (see the module documentation).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -155,13 +155,16 @@ impl OutputGuard {
     fn check_row(&self, out: &mut [f32], warped: &[f32], refined: &[f32]) -> RefinementCheck {
         let n = out.len();
         let (warped, refined) = (&warped[..n], &refined[..n]);
-        let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
         let [mut measured, mut non_finite, mut non_positive, mut moved_too_far] = [0u32; 4];
         for i in 0..n {
             let (z, r) = (warped[i], refined[i]);
-            let (measured_here, finite) = (valid(z), r.is_finite());
+            let (measured_here, finite) = (is_valid_depth_branchless(z), r.is_finite());
             let bound = self.max_change_m.max(self.max_change_ratio * z);
-            out[i] = if measured_here & valid(r) { r } else { 0.0 };
+            out[i] = if measured_here & is_valid_depth_branchless(r) {
+                r
+            } else {
+                0.0
+            };
             measured += u32::from(measured_here);
             non_finite += u32::from(measured_here & !finite);
             non_positive += u32::from(measured_here & finite & (r <= 0.0));

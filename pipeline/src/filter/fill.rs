@@ -10,7 +10,7 @@
 use ndarray::{ArrayView2, ArrayView3, ArrayViewMut2};
 
 use crate::filter::par_rows2;
-use crate::geometry::surface::same_surface;
+use crate::geometry::surface::{is_valid_depth_branchless, same_surface};
 
 /// Settings of [`fill_holes`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -87,10 +87,9 @@ pub fn fill_holes(
             .sum();
         sum as f32
     };
+    // The fill of hole `(y, x)`: `(depth, confidence)`, or `None` with no valid pixel in reach.
     // Written without branches on the data where it can be: holes and their edges are
     // irregular, and mispredicted branches, not arithmetic, were most of this function's cost.
-    let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
-    // The fill of hole `(y, x)`: `(depth, confidence)`, or `None` with no valid pixel in reach.
     let fill = |y: usize, x: usize| -> Option<(f32, u8)> {
         // Costs of the window's pixels, the invalid ones +∞: (flat index, cost).
         let mut cand = [(0usize, 0.0f32); (2 * MAX_FILL_RADIUS + 1) * (2 * MAX_FILL_RADIUS + 1)];
@@ -104,7 +103,7 @@ pub fn fill_holes(
             for xx in x0..=x1 {
                 let j = yy * w + xx;
                 let zz = d[j];
-                let ok = valid(zz);
+                let ok = is_valid_depth_branchless(zz);
                 let dx = xx as f32 - x as f32;
                 let cost = colour_dist2(i, j) * inv_c + (dy * dy + dx * dx) * inv_s;
                 let cost = if ok { cost } else { f32::INFINITY };
@@ -139,7 +138,7 @@ pub fn fill_holes(
             let mut holes = 0u64;
             for x in start..end {
                 let z = row[x];
-                let ok = valid(z);
+                let ok = is_valid_depth_branchless(z);
                 (out_row[x], conf_row[x]) = (if ok { z } else { 0.0 }, 0);
                 holes |= u64::from(!ok) << (x - start);
             }

@@ -9,7 +9,8 @@
 use ndarray::{ArrayView2, ArrayViewMut2};
 
 use crate::filter::par_rows;
-use crate::geometry::surface::is_valid_depth;
+use crate::geometry::surface::{is_valid_depth, is_valid_depth_branchless};
+use crate::vector_math::window3x3;
 
 /// Copy `depth` into `out`, writing `0` for invalid pixels and for flying pixels: those that,
 /// along some direction (horizontal, vertical, either diagonal) with both neighbours valid, lie strictly between the two neighbours and
@@ -63,21 +64,10 @@ pub fn remove_flying_pixels(depth: ArrayView2<f32>, rel: f32, abs_m: f32, out: A
         // Interior: every pair exists, and the loop is branch-free (vectorised). The windows
         // are the left, centre and right neighbours of each interior pixel in the three rows.
         let (up, down) = (&d[(y - 1) * w..y * w], &d[(y + 1) * w..(y + 2) * w]);
-        let n = w - 2;
-        let (ul, uc, ur) = (&up[..n], &up[1..n + 1], &up[2..]);
-        let (cl, cc, cr) = (&cur[..n], &cur[1..n + 1], &cur[2..]);
-        let (dl, dc, dr) = (&down[..n], &down[1..n + 1], &down[2..]);
-        let window = [ul, uc, ur, cl, cc, cr, dl, dc, dr];
-        interior_row(window, (rel, abs_m), &mut row[1..n + 1]);
+        interior_row(window3x3([up, cur, down]), (rel, abs_m), &mut row[1..w - 1]);
         row[0] = general(0);
         row[w - 1] = general(w - 1);
     });
-}
-
-/// Whether `z` is valid: `is_valid_depth` without short-circuits (`z > 0` and finite).
-#[inline(always)]
-fn valid(z: f32) -> bool {
-    (z > 0.0) & (z < f32::INFINITY)
 }
 
 /// Whether `z` lies strictly between `a` and `b` and off both surfaces (tolerance `tol`).
@@ -86,7 +76,11 @@ fn valid(z: f32) -> bool {
 #[inline(always)]
 fn mixed(z: f32, tol: f32, a: f32, b: f32) -> bool {
     let (da, db) = (z - a, b - z);
-    (da.abs() > tol) & (db.abs() > tol) & (da * db > 0.0) & valid(a) & valid(b)
+    (da.abs() > tol)
+        & (db.abs() > tol)
+        & (da * db > 0.0)
+        & is_valid_depth_branchless(a)
+        & is_valid_depth_branchless(b)
 }
 
 /// The interior pixels of one row of [`remove_flying_pixels`]: `window` holds the nine shifted
@@ -104,7 +98,11 @@ fn interior_row(window: [&[f32]; 9], (rel, abs_m): (f32, f32), out: &mut [f32]) 
             | mixed(z, tol, uc[i], dc[i])
             | mixed(z, tol, ul[i], dr[i])
             | mixed(z, tol, ur[i], dl[i]);
-        out[i] = if valid(z) & !flying { z } else { 0.0 };
+        out[i] = if is_valid_depth_branchless(z) & !flying {
+            z
+        } else {
+            0.0
+        };
     }
 }
 

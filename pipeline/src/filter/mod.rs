@@ -35,7 +35,7 @@ use crate::filter::fill::{fill_holes, FillParams};
 use crate::filter::flying::remove_flying_pixels;
 use crate::filter::outlier::reject_outliers;
 use crate::filter::snap::snap_to_surface;
-use crate::geometry::surface::surface_tolerance;
+use crate::geometry::surface::{is_valid_depth_branchless, surface_tolerance};
 
 /// Runs `f(y, a_row, b_row)` on every row of `a` and `b` (same number of rows), rows in
 /// parallel, on contiguous row slices so that the stages' inner loops are flat (and
@@ -325,10 +325,9 @@ fn output_row(
     out: &mut [f32],
     confidence: &mut [u8],
 ) {
-    let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
     for (x, (o, c)) in out.iter_mut().zip(confidence.iter_mut()).enumerate() {
         let (d, z, measured) = (filled[x], surfaced[x], measured[x]);
-        let ok = valid(d) & valid(z);
+        let ok = is_valid_depth_branchless(d) & is_valid_depth_branchless(z);
         let replaced = flying_snapped[x] | outlier_replaced[x];
         let fc = match fill_confidence[x] {
             0 if replaced => REPLACED_CONFIDENCE,

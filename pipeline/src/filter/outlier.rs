@@ -9,17 +9,12 @@
 use ndarray::{ArrayView2, ArrayViewMut2};
 
 use crate::filter::par_rows2;
-use crate::geometry::surface::{is_valid_depth, same_surface};
+use crate::geometry::surface::{is_valid_depth, is_valid_depth_branchless, same_surface};
+use crate::vector_math::window3x3;
 
 /// Fewest valid pixels (of 9) a neighbourhood needs for its median to overrule the centre:
 /// with fewer, the centre may be a thin structure, not noise.
 const MIN_VALID_NEIGHBOURS: usize = 5;
-
-/// Whether `z` is valid: [`is_valid_depth`] without short-circuits (`z > 0` and finite).
-#[inline(always)]
-fn valid(z: f32) -> bool {
-    (z > 0.0) & (z < f32::INFINITY)
-}
 
 /// Sorts nine values (no NaN) ascending with a 25-comparator sorting network: branch-free,
 /// so a loop over pixels vectorises.
@@ -120,19 +115,8 @@ pub fn reject_outliers(
         // value the insertion sort of the valid values gives, so the result is identical.
         let row = |yy: usize| &z[yy * w..(yy + 1) * w];
         let (up, cur, down) = (row(y - 1), row(y), row(y + 1));
-        let n = w - 2;
-        let window = [
-            &up[..n],
-            &up[1..n + 1],
-            &up[2..],
-            &cur[..n],
-            &cur[1..n + 1],
-            &cur[2..],
-            &down[..n],
-            &down[1..n + 1],
-            &down[2..],
-        ];
-        interior_row(window, &mut out_row[1..n + 1], &mut flag_row[1..n + 1]);
+        let window = window3x3([up, cur, down]);
+        interior_row(window, &mut out_row[1..w - 1], &mut flag_row[1..w - 1]);
         for x in [0, w - 1] {
             exact(x, &mut out_row[x], &mut flag_row[x]);
         }
@@ -152,7 +136,7 @@ fn interior_row(window: [&[f32]; 9], out: &mut [f32], replaced: &mut [bool]) {
         let mut v = [0.0f32; 9];
         let mut count = 0u32;
         for (v, s) in v.iter_mut().zip(window) {
-            let ok = valid(s[i]);
+            let ok = is_valid_depth_branchless(s[i]);
             count += u32::from(ok);
             *v = if ok { s[i] } else { f32::INFINITY };
         }
@@ -163,7 +147,7 @@ fn interior_row(window: [&[f32]; 9], out: &mut [f32], replaced: &mut [bool]) {
             _ => v[4],
         };
         let centre = window[4][i];
-        let keep = valid(centre);
+        let keep = is_valid_depth_branchless(centre);
         let replace = keep & (count >= MIN_VALID_NEIGHBOURS as u32) & !same_surface(m, centre);
         out[i] = if replace {
             m

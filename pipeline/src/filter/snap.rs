@@ -11,7 +11,7 @@
 use ndarray::{ArrayView2, ArrayViewMut2};
 
 use crate::filter::par_rows2;
-use crate::geometry::surface::same_surface;
+use crate::geometry::surface::{is_valid_depth_branchless, same_surface};
 
 /// For every pixel with a valid `value`: keeps it when a valid `reference` depth within
 /// `radius` (Chebyshev distance, the pixel itself included) is on its surface, else replaces
@@ -61,8 +61,6 @@ fn snap_row(
     out_row: &mut [f32],
     flag_row: &mut [bool],
 ) {
-    // Whether `z` is valid: `is_valid_depth` without short-circuits (`z > 0` and finite).
-    let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
     let value_row = &v[y * w..(y + 1) * w];
     let own_row = &r[y * w..(y + 1) * w];
     // The common case first, branch-free (vectorised): the pixel's own reference is on
@@ -74,7 +72,8 @@ fn snap_row(
         .zip(value_row)
         .zip(own_row)
     {
-        let keep = valid(v) & valid(own) & same_surface(own, v);
+        let keep =
+            is_valid_depth_branchless(v) & is_valid_depth_branchless(own) & same_surface(own, v);
         (*o, *f) = (if keep { v } else { 0.0 }, false);
     }
     let (y0, y1) = (y.saturating_sub(radius), (y + radius).min(h - 1));
@@ -87,7 +86,7 @@ fn snap_row(
         let mut on_surface = false;
         for yy in y0..=y1 {
             for &z in &r[yy * w + x0..=yy * w + x1] {
-                let ok = valid(z);
+                let ok = is_valid_depth_branchless(z);
                 on_surface |= ok & same_surface(z, v);
                 let d = if ok { (z - v).abs() } else { f32::INFINITY };
                 if d < nearest.0 {
@@ -109,7 +108,7 @@ fn snap_row(
     for start in (0..w).step_by(64) {
         let end = (start + 64).min(w);
         let mut pending = (start..end).fold(0u64, |bits, x| {
-            let needs_search = (out_row[x] == 0.0) & valid(value_row[x]);
+            let needs_search = (out_row[x] == 0.0) & is_valid_depth_branchless(value_row[x]);
             bits | (u64::from(needs_search) << (x - start))
         });
         while pending != 0 {

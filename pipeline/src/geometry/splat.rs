@@ -27,7 +27,8 @@ use rayon::prelude::*;
 
 use crate::calibration::Calibration;
 use crate::frame::Flow;
-use crate::geometry::surface::{is_valid_depth, same_surface};
+use crate::geometry::surface::{is_valid_depth, is_valid_depth_branchless, same_surface};
+use crate::geometry::warp::bilinear_weights;
 
 /// Contributions at or below this bilinear weight are ignored.
 pub const SPLAT_MIN_WEIGHT: f32 = 1e-3;
@@ -53,18 +54,32 @@ pub struct SynthesizedView {
 /// The cell a point splatted at `(tx, ty)` falls in: its top-left pixel `(x0, y0)` and the
 /// bilinear weights of the taps `(y0, x0), (y0, x0+1), (y0+1, x0), (y0+1, x0+1)`, or `None`
 /// for a non-finite (or absurdly far, ≥ 1e9 px) point.
-///
-/// `floor` is computed by truncation: without SSE4.1 (the default x86-64 target) `f32::floor`
-/// is a call per tap point, which was a tenth of the daemon's splat. The result is the same:
-/// `|t| < 1e9 < 2³¹`, and for `|t| ≥ 2²³` every `f32` is already an integer.
 #[inline]
 fn splat_cell(tx: f32, ty: f32) -> Option<(i64, i64, [f32; 4])> {
     // Written so that NaN fails the test.
     if !(tx.abs() < 1e9 && ty.abs() < 1e9) {
         return None;
     }
+    let (x0, y0, wts) = cell_within_range(tx, ty);
+    Some((i64::from(x0), i64::from(y0), wts))
+}
+
+/// [`splat_cell`] of a point the caller has found finite and within 1e9 px of the origin
+/// (any other point is taken as the origin).
+///
+/// `floor` is computed by truncation: without SSE4.1 (the default x86-64 target) `f32::floor`
+/// is a call per tap point, which was a tenth of the daemon's splat. The result is the same:
+/// `|t| < 1e9 < 2³¹`, and for `|t| ≥ 2²³` every `f32` is already an integer. The truncation is
+/// `to_int_unchecked`, not `as i32`, which saturates and which the compiler converts one lane
+/// at a time ([`prepare_run`] vectorises over this).
+#[inline(always)]
+fn cell_within_range(tx: f32, ty: f32) -> (i32, i32, [f32; 4]) {
     let floor = |t: f32| {
-        let i = t as i32;
+        // The callers pass only such values; the select keeps the function sound for any.
+        let t = if t.abs() < 1e9 { t } else { 0.0 };
+        // SAFETY: `t` is finite and below 1e9 < 2³¹ in magnitude, so its truncation is an i32
+        // value (`to_int_unchecked`'s requirement).
+        let i = unsafe { t.to_int_unchecked::<i32>() };
         if i as f32 > t {
             i - 1
         } else {
@@ -73,16 +88,7 @@ fn splat_cell(tx: f32, ty: f32) -> Option<(i64, i64, [f32; 4])> {
     };
     let (x0, y0) = (floor(tx), floor(ty));
     let (fx, fy) = (tx - x0 as f32, ty - y0 as f32);
-    Some((
-        i64::from(x0),
-        i64::from(y0),
-        [
-            (1.0 - fx) * (1.0 - fy),
-            fx * (1.0 - fy),
-            (1.0 - fx) * fy,
-            fx * fy,
-        ],
-    ))
+    (x0, y0, bilinear_weights(fx, fy))
 }
 
 /// Target pixels and bilinear weights of a point splatted at `(tx, ty)`, clipped to the
@@ -277,8 +283,8 @@ fn band_taps(
 /// Step 1 of the depth-only splat for one run of a source row (`depth` the run's values, its
 /// first pixel at `(y, x_first)`): each pixel's [`Cell`] (what [`landing`] and [`splat_cell`]
 /// give, `NO_CELL` with zero weights where they give `None`), and the run's span of top tap
-/// rows (`(i32::MAX, i32::MIN)` without a cell). Written with selects and a conversion that
-/// cannot saturate, so that the run vectorises; compiled for AVX-512 and AVX2 as well, chosen
+/// rows (`(i32::MAX, i32::MIN)` without a cell). Written with selects, so that the run
+/// vectorises; compiled for AVX-512 and AVX2 as well, chosen
 /// at run time.
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
 fn prepare_run(
@@ -294,22 +300,10 @@ fn prepare_run(
         let (fu, fv) = p.flow_formula(z);
         let (tx, ty) = ((x_first + i) as f32 - fu, y as f32 - fv);
         // `landing`'s and `splat_cell`'s tests: a valid depth, a finite point within 1e9 px.
-        let ok = (z > 0.0) & (z < f32::INFINITY) & (tx.abs() < 1e9) & (ty.abs() < 1e9);
+        let ok = is_valid_depth_branchless(z) & (tx.abs() < 1e9) & (ty.abs() < 1e9);
+        // A pixel without a cell is computed at (0, 0), within range, and its result dropped.
         let (tx, ty) = if ok { (tx, ty) } else { (0.0, 0.0) };
-        // SAFETY: `tx` and `ty` are finite and below 1e9 < 2³¹ in magnitude here, so their
-        // truncations are i32 values (`to_int_unchecked`'s requirement). `as i32` would
-        // saturate, which the compiler does one lane at a time.
-        let (ix, iy) = unsafe { (tx.to_int_unchecked::<i32>(), ty.to_int_unchecked::<i32>()) };
-        // Floor from truncation, as `splat_cell` computes it.
-        let x0 = if ix as f32 > tx { ix - 1 } else { ix };
-        let y0 = if iy as f32 > ty { iy - 1 } else { iy };
-        let (fx, fy) = (tx - x0 as f32, ty - y0 as f32);
-        let wts = [
-            (1.0 - fx) * (1.0 - fy),
-            fx * (1.0 - fy),
-            (1.0 - fx) * fy,
-            fx * fy,
-        ];
+        let (x0, y0, wts) = cell_within_range(tx, ty);
         *c = Cell {
             x0: if ok { x0 } else { 0 },
             y0: if ok { y0 } else { NO_CELL },
@@ -417,11 +411,10 @@ impl SplatScratch {
             });
             // Pass 3: normalise and validate (selects again: coverage and holes are
             // irregular). `flow_at(z)` is `Some` exactly where `z` is a valid depth.
-            let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
             for (o, a) in out.iter_mut().zip(acc.iter()) {
                 let [_, ws, any, zs] = *a;
                 let z = zs / ws.max(f32::MIN_POSITIVE);
-                *o = if (ws > 0.0) & (any >= SPLAT_MIN_COVERAGE) & valid(z) {
+                *o = if (ws > 0.0) & (any >= SPLAT_MIN_COVERAGE) & is_valid_depth_branchless(z) {
                     z
                 } else {
                     0.0
@@ -431,7 +424,11 @@ impl SplatScratch {
                 let fallback = fallback.unwrap_or((0.0, 0.0));
                 for ((u, v), &z) in u.iter_mut().zip(v.iter_mut()).zip(out.iter()) {
                     let at = p.flow_formula(z);
-                    (*u, *v) = if valid(z) { at } else { fallback };
+                    (*u, *v) = if is_valid_depth_branchless(z) {
+                        at
+                    } else {
+                        fallback
+                    };
                 }
             }
         };

@@ -32,6 +32,14 @@ pub fn same_surface(z_ref: f32, z: f32) -> bool {
 /// The one validity rule of a depth sample, defined with the capture format that stores it.
 pub use dear_capture::is_valid_depth;
 
+/// [`is_valid_depth`] without short-circuits (`z > 0` and below +∞, so finite: NaN fails the
+/// first comparison), for loops written with selects so that they vectorise: a short-circuit
+/// is a branch, and where holes are it is mispredicted.
+#[inline(always)]
+pub(crate) fn is_valid_depth_branchless(z: f32) -> bool {
+    (z > 0.0) & (z < f32::INFINITY)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

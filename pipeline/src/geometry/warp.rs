@@ -16,7 +16,7 @@ use ndarray::{
 };
 
 use crate::frame::Flow;
-use crate::geometry::surface::surface_tolerance;
+use crate::geometry::surface::{is_valid_depth_branchless, surface_tolerance};
 use crate::vector_math::floor_small;
 
 /// The four bilinear neighbours of a sample point and their weights, in the fixed order
@@ -27,6 +27,18 @@ pub(crate) struct Taps {
     pub idx: [usize; 4],
     /// Bilinear weight of each neighbour; they sum to 1.
     pub w: [f32; 4],
+}
+
+/// The bilinear weights of the taps `(y0, x0), (y0, x1), (y1, x0), (y1, x1)` at fractions
+/// `(fx, fy)` past `(x0, y0)`: sampling (the warps) and splatting use the same weights.
+#[inline(always)]
+pub(crate) fn bilinear_weights(fx: f32, fy: f32) -> [f32; 4] {
+    [
+        (1.0 - fx) * (1.0 - fy),
+        fx * (1.0 - fy),
+        (1.0 - fx) * fy,
+        fx * fy,
+    ]
 }
 
 /// Bilinear taps of the sample point `(sx, sy)` (column, row) in an `h × w` image, or `None`
@@ -51,12 +63,7 @@ pub(crate) fn bilinear_taps(sx: f32, sy: f32, h: usize, w: usize) -> Option<Taps
     let fy = sy - y0 as f32;
     Some(Taps {
         idx: [y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1],
-        w: [
-            (1.0 - fx) * (1.0 - fy),
-            fx * (1.0 - fy),
-            (1.0 - fx) * fy,
-            fx * fy,
-        ],
+        w: bilinear_weights(fx, fy),
     })
 }
 
@@ -178,12 +185,6 @@ fn blend_depth(d: [f32; 4], wt: [f32; 4]) -> f32 {
     }
 }
 
-/// [`is_valid_depth`](crate::geometry::surface::is_valid_depth) without a short-circuit.
-#[inline]
-fn is_valid_depth_branchless(z: f32) -> bool {
-    (z > 0.0) & z.is_finite()
-}
-
 /// [`warp_depth`] of `depth` and [`warp_bilinear`] of `amplitude` (same size) with one flow,
 /// in one pass: the refiner's two inputs. The sample point and its taps are computed once per
 /// pixel instead of once per warp; each output is bit-identical to its own warp's.
@@ -287,10 +288,9 @@ fn fused_row(
             inside[j] = ok;
             (idx[0][j], idx[1][j]) = (y0 * w32 + x0, y0 * w32 + x1);
             (idx[2][j], idx[3][j]) = (y1 * w32 + x0, y1 * w32 + x1);
-            wt[0][j] = (1.0 - fx) * (1.0 - fy);
-            wt[1][j] = fx * (1.0 - fy);
-            wt[2][j] = (1.0 - fx) * fy;
-            wt[3][j] = fx * fy;
+            for (k, tap_wt) in bilinear_weights(fx, fy).into_iter().enumerate() {
+                wt[k][j] = tap_wt;
+            }
         }
         // Loads.
         for k in 0..4 {

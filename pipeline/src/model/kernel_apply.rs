@@ -17,6 +17,7 @@
 use ndarray::{Array2, ArrayView2, ArrayViewMut2, Axis, CowArray, Ix2};
 use rayon::prelude::*;
 
+use crate::geometry::surface::is_valid_depth_branchless;
 use crate::model::manifest::RefineApply;
 use crate::vector_math::exp_fast;
 
@@ -262,14 +263,12 @@ fn contiguous<'a>(row: &'a ndarray::ArrayView1<'_, f32>) -> std::borrow::Cow<'a,
 /// validity of `d` and `c` picks the result) so that it vectorises.
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
 fn blend_row(out: &mut [f32], d_row: &[f32], c_row: &[f32], logits: &[f32], jump: f32) {
-    // `is_valid_depth` without short-circuits.
-    let valid = |z: f32| (z > 0.0) & (z < f32::INFINITY);
     for (((o, &d), &c), &logit) in out.iter_mut().zip(d_row).zip(c_row).zip(logits) {
         let t = sigmoid(logit + jump * (c - d).abs());
         let b = d + t * (c - d);
         // A corrupt trust map falls back to the measurement.
         let b = if b.is_finite() { b } else { d };
-        let (d_ok, c_ok) = (valid(d), valid(c));
+        let (d_ok, c_ok) = (is_valid_depth_branchless(d), is_valid_depth_branchless(c));
         let only_c = if c_ok { c } else { 0.0 };
         let only_d = if d_ok { d } else { only_c };
         *o = if d_ok & c_ok { b } else { only_d };

@@ -24,6 +24,9 @@
 use ndarray::{ArrayView2, ArrayView3};
 use rayon::prelude::*;
 
+use crate::geometry::surface::is_valid_depth_branchless;
+use crate::vector_math::window3x3;
+
 /// Fewest sampled pixels for a meaningful correlation.
 pub const MIN_SAMPLES: usize = 64;
 
@@ -314,32 +317,20 @@ fn gradient_row(
     }
     // sqrt, not hypot: no overflow to guard against here, and hypot was 4 % of a VGA frame.
     let magnitude = |gx: f32, gy: f32| (gx * gx + gy * gy).sqrt();
-    // `is_valid_depth` without short-circuits; the loop is written with selects (every pixel
-    // computes both gradients, validity picks them) so that it vectorises: holes make branches
-    // on validity unpredictable.
-    let valid_depth = |z: f32| (z > 0.0) & (z < f32::INFINITY);
     // Equal-length slices of the neighbours (left, right, up, down, centre), so that the loop
-    // has no bounds checks left to stop it vectorising.
+    // has no bounds checks left to stop it vectorising; validity picks the gradients with
+    // selects (holes make branches on it unpredictable).
     let n = w - 2;
-    fn centre(r: &[f32]) -> &[f32] {
-        &r[1..r.len() - 1]
-    }
-    fn left(r: &[f32]) -> &[f32] {
-        &r[..r.len() - 2]
-    }
-    fn right(r: &[f32]) -> &[f32] {
-        &r[2..]
-    }
-    let (dc, dl, dr, du, dd) = (centre(d1), left(d1), right(d1), centre(d0), centre(d2));
-    let (al, ar, au, ad) = (left(a1), right(a1), centre(a0), centre(a2));
-    let (ll, lr, lu, ld) = (left(l1), right(l1), centre(l0), centre(l2));
+    let [_, du, _, dl, dc, dr, _, dd, _] = window3x3([d0, d1, d2]);
+    let [_, au, _, al, _, ar, _, ad, _] = window3x3([a0, a1, a2]);
+    let [_, lu, _, ll, _, lr, _, ld, _] = window3x3([l0, l1, l2]);
     let (ag, lg, valid) = (&mut ag[1..=n], &mut lg[1..=n], &mut valid[1..=n]);
     for i in 0..n {
-        let ok = valid_depth(dc[i])
-            & valid_depth(du[i])
-            & valid_depth(dd[i])
-            & valid_depth(dl[i])
-            & valid_depth(dr[i]);
+        let ok = is_valid_depth_branchless(dc[i])
+            & is_valid_depth_branchless(du[i])
+            & is_valid_depth_branchless(dd[i])
+            & is_valid_depth_branchless(dl[i])
+            & is_valid_depth_branchless(dr[i]);
         let ga = magnitude(ar[i] - al[i], ad[i] - au[i]);
         let gl = magnitude(lr[i] - ll[i], ld[i] - lu[i]);
         let ok = ok & ga.is_finite();
