@@ -28,10 +28,19 @@ PAPER_AEPE = {2: (1.52, 1.34), 4: (2.10, 1.87), 6: (2.70, 2.45)}
 Report = dict[str, Any]
 
 
+#: The outside aligner's row (scripts/outside_aligner.py, written beside eval.json by results.sh).
+OUTSIDE = "outside-aligner"
+OUTSIDE_LABEL = "outside aligner (OpenCV DIS + RANSAC)"
+
+
 def load(eval_dir: Path, name: str) -> dict[str, Report]:
     path = eval_dir / name / "eval.json"
     data = json.loads(path.read_text())
-    return {m["method"]: m for m in data["methods"]} | {"__file__": data}
+    report = {m["method"]: m for m in data["methods"]} | {"__file__": data}
+    outside = eval_dir / name / "outside_aligner.json"
+    if outside.is_file():
+        report[OUTSIDE] = json.loads(outside.read_text())
+    return report
 
 
 def fmt(v: float | None, digits: int = 2) -> str:
@@ -80,6 +89,7 @@ def table_alignment(sets: dict[int, dict[str, Report]]) -> list[str]:
     row("static calibration (factory)", "static-calibration", "aepe_px")
     row("classical edge matching + LS", "edge-matching", "aepe_px")
     row("direct fit of (t, c) to all edges", "direct-fit", "aepe_px")
+    row(OUTSIDE_LABEL, OUTSIDE, "aepe_px")
     for b in bundles(sets[SIGMAS[0]]):
         row(f"{b}: rough flow W_rough", b, "aepe_rough_px")
         row(f"{b}: final flow (direct fit from W_rough's calibration)", b, "aepe_px")
@@ -94,6 +104,7 @@ def table_alignment_one(report: dict[str, Report]) -> list[str]:
         ("static calibration (factory)", "static-calibration", "aepe_px"),
         ("classical edge matching + LS", "edge-matching", "aepe_px"),
         ("direct fit of (t, c) to all edges", "direct-fit", "aepe_px"),
+        (OUTSIDE_LABEL, OUTSIDE, "aepe_px"),
     ]
     for b in bundles(report):
         rows += [

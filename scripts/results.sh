@@ -87,6 +87,23 @@ for set in aligned sigma2 sigma4 sigma6 heldout heldout-sigma4; do
     target/release/dear eval --capture "$data/$set" --baselines "${bundles[@]}" "${extra[@]}" \
         --figures "$figures" --out "$out/$set" > /dev/null
 done
+# The outside aligner (issue 32, scripts/outside_aligner.py): OpenCV only, in its own venv (made
+# here; skipped when it cannot be); its scoring is checked against fixtures/ and its static
+# row against dear eval's on every set before its figure is written.
+cvenv=out/opencv-venv
+rm -f "$out"/*/outside_aligner.json
+if [ ! -x "$cvenv/bin/python" ]; then
+    { python3 -m venv "$cvenv" && "$cvenv/bin/pip" install --quiet opencv-contrib-python-headless \
+        numpy pillow; } || rm -rf "$cvenv"
+fi
+if [ -x "$cvenv/bin/python" ]; then
+    "$cvenv/bin/python" scripts/outside_aligner.py --check > /dev/null
+    for set in sigma2 sigma4 sigma6 heldout-sigma4; do
+        echo "== outside aligner on $set"
+        "$cvenv/bin/python" scripts/outside_aligner.py "$data/$set" \
+            --check-static "$out/$set/eval.json" --json "$out/$set/outside_aligner.json" > /dev/null
+    done
+fi
 echo "== dear eval --online on the drifting sequence"
 target/release/dear eval --capture "$data/sequence" --baselines "${bundles[@]}" --online \
     --figures 0 --out "$out/sequence" > /dev/null
