@@ -186,7 +186,7 @@ pub struct TofNodeConfig {
     #[serde(flatten)]
     pub node: NodeConfig,
     /// 4-phase formats: the modulation frequency, Hz (Arducam ToF: 75e6 for its 2 m range,
-    /// 37.5e6 for 4 m).
+    /// 37.5e6 for 4 m). Any format: depth beyond its unambiguous range `c / 2f` is invalid.
     pub modulation_hz: Option<f64>,
     /// 4-phase formats: `"standard"` (Q = D1 − D3) or `"inverted"` (Q = D3 − D1, Arducam).
     #[serde(default)]
@@ -537,20 +537,20 @@ fn check_v4l(v4l: &V4lConfig) -> Result<(), String> {
         }
     }
     let tof = &v4l.tof;
+    // Any format: a depth module's frequency bounds its depth (capture::DepthLimit).
+    if let Some(f) = tof.modulation_hz {
+        if !(f.is_finite() && f > 0.0) {
+            return Err(format!(
+                "[capture.v4l.tof] modulation_hz = {f} must be a positive frequency"
+            ));
+        }
+    }
     if matches!(node_format(&tof.node), Ok(P::Y12 | P::Y12P)) {
-        match tof.modulation_hz {
-            Some(f) if f.is_finite() && f > 0.0 => {}
-            Some(f) => {
-                return Err(format!(
-                    "[capture.v4l.tof] modulation_hz = {f} must be a positive frequency"
-                ))
-            }
-            None => {
-                return Err(format!(
-                    "[capture.v4l.tof] format = {:?} is raw 4-phase data: modulation_hz is needed to turn phase into distance",
-                    tof.node.format
-                ))
-            }
+        if tof.modulation_hz.is_none() {
+            return Err(format!(
+                "[capture.v4l.tof] format = {:?} is raw 4-phase data: modulation_hz is needed to turn phase into distance",
+                tof.node.format
+            ));
         }
         if tof.node.format == "Y12P" && !tof.node.height.is_multiple_of(4) {
             return Err(format!(

@@ -13,7 +13,7 @@ use dear_proto::{FrameHeader, Stage};
 use crate::calibration_state::CalibrationState;
 use crate::capture::replay::{ReplayOpenError, ReplaySource};
 use crate::capture::v4l::{V4lOpenError, V4lSource};
-use crate::capture::{FrameSource, SourceItem};
+use crate::capture::{BeyondRange, FrameSource, SourceItem};
 use crate::config::{check_calibration_fits, Config, ConfigError, Pacing};
 use crate::processing::{EngineError, PreparedFrame, Processor};
 use crate::publish::{FramePublisher, PublisherError};
@@ -135,7 +135,18 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         Some(path) => Some(Recorder::start(path, source.recording_manifest())?),
         None => None,
     };
-    let capture = spawn_capture(source, recorder, queue.clone(), shutdown.clone());
+    let beyond_range = Arc::new(BeyondRange::default());
+    match source.depth_limit() {
+        Some(limit) => tracing::info!(max_m = limit.max_m, origin = %limit.origin, "depth beyond the module's range is marked invalid"),
+        None => tracing::info!("no depth limit known (no max_range_m, no single modulation frequency): depth is not range-checked"),
+    }
+    let capture = spawn_capture(
+        source,
+        recorder,
+        queue.clone(),
+        shutdown.clone(),
+        beyond_range.clone(),
+    );
 
     let _ = sd_notify::notify(&[sd_notify::NotifyState::Ready]);
     let mut watchdog = Watchdog::from_env();
@@ -205,6 +216,8 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
                     published = path.stats.published,
                     skipped = path.stats.skipped,
                     dropped = queue.dropped(),
+                    depth_beyond_range_frames = beyond_range.frames(),
+                    depth_beyond_range_pixels = beyond_range.pixels(),
                     "source finished"
                 );
                 if config.runtime.exit_when_done {
@@ -237,6 +250,8 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
                     skipped = path.stats.skipped,
                     dropped = queue.dropped(),
                     network_rejected = path.processor.network_output_rejected(),
+                    depth_beyond_range_frames = beyond_range.frames(),
+                    depth_beyond_range_pixels = beyond_range.pixels(),
                     "{report}"
                 );
             }
@@ -258,6 +273,8 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         skipped = stats.skipped,
         dropped = stats.dropped,
         network_rejected = processor.network_output_rejected(),
+        depth_beyond_range_frames = beyond_range.frames(),
+        depth_beyond_range_pixels = beyond_range.pixels(),
         uptime_s = stats.uptime_s(),
         "stopped"
     );
@@ -430,19 +447,26 @@ impl Watchdog {
 /// The capture thread: pulls items from the source into the queue until the source ends or
 /// fails, the queue closes or shutdown is requested. The source's waits give way to `shutdown`
 /// and the queue's to [`FrameQueue::close`], so the thread can always be joined promptly.
+/// Depth beyond the source's [`DepthLimit`](crate::capture::DepthLimit) is marked invalid
+/// (and counted in `beyond_range`) first, so the recorder records what is processed.
 fn spawn_capture(
     mut source: Box<dyn FrameSource>,
     mut recorder: Option<Recorder>,
     queue: Arc<FrameQueue<SourceItem>>,
     shutdown: Arc<AtomicBool>,
+    beyond_range: Arc<BeyondRange>,
 ) -> thread::JoinHandle<()> {
+    let limit = source.depth_limit();
     thread::Builder::new()
         .name("capture".into())
         .spawn(move || {
             while !shutdown.load(Ordering::Relaxed) {
-                let item = source.next_item(&shutdown);
+                let mut item = source.next_item(&shutdown);
                 if shutdown.load(Ordering::Relaxed) {
                     break;
+                }
+                if let (Some(limit), SourceItem::Frame { frame, .. }) = (&limit, &mut item) {
+                    beyond_range.apply(limit, frame);
                 }
                 if let (Some(rec), SourceItem::Frame { frame, .. }) = (&mut recorder, &item) {
                     rec.offer(frame);

@@ -79,6 +79,14 @@ fn values_that_cannot_work_are_refused_by_key() {
             "modulation_hz is needed",
         ),
         (
+            // A depth format's frequency bounds its depth (c / 2f): it must be one too.
+            live(&tables.replace(
+                "format = \"Z16 \"",
+                "format = \"Z16 \"\nmodulation_hz = -20e6",
+            )),
+            "modulation_hz = -20000000 must be a positive frequency",
+        ),
+        (
             live(
                 &tables
                     .replace(

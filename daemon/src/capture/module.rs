@@ -21,6 +21,12 @@ pub struct ModuleCalibration {
     /// Metres per unit of a `Z16 `/`Y16 ` depth image (RealSense: 0.001).
     #[serde(default = "default_depth_scale")]
     pub depth_scale_m: f32,
+    /// The farthest z-depth the module measures, metres (its data sheet's range): depth beyond
+    /// it is marked invalid as frames arrive ([`DepthLimit`](super::DepthLimit)). None: no
+    /// limit but the modulation's unambiguous range, where `[capture.v4l.tof] modulation_hz`
+    /// gives one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_range_m: Option<f32>,
     pub tof: Camera,
     pub rgb: Camera,
     pub extrinsics: Extrinsics,
@@ -111,6 +117,13 @@ impl ModuleCalibration {
                 "depth_scale_m = {} must be a positive number of metres per unit",
                 self.depth_scale_m
             ));
+        }
+        if let Some(r) = self.max_range_m {
+            if !(r.is_finite() && r > 0.0) {
+                return Err(format!(
+                    "max_range_m = {r} must be a positive number of metres (leave it out for no limit)"
+                ));
+            }
         }
         for (name, cam) in [("tof", &self.tof), ("rgb", &self.rgb)] {
             let max = dear_capture::manifest::MAX_SIDE;
@@ -208,6 +221,7 @@ mod tests {
     fn the_documented_example_loads() {
         let cal = parse(EXAMPLE).unwrap();
         assert_eq!(cal.depth_scale_m, 0.001);
+        assert_eq!(cal.max_range_m, Some(4.0));
         assert!(cal.initial_calibration().tx.is_finite());
     }
 
@@ -232,6 +246,16 @@ mod tests {
                 "depth_scale_m = 0.001",
                 "depth_scale_m = 0.0",
                 "depth_scale_m",
+            ),
+            (
+                "max_range_m = 4.0",
+                "max_range_m = -4.0",
+                "max_range_m = -4 must be a positive number of metres",
+            ),
+            (
+                "max_range_m = 4.0",
+                "max_range_m = nan",
+                "max_range_m = NaN must be a positive number of metres",
             ),
             (
                 "rotation = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]",

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use dear_capture::{Calibration, CaptureDir, CaptureError, CaptureManifest};
 
-use super::{sleep_unless, FrameSource, SourceItem};
+use super::{sleep_unless, DepthLimit, FrameSource, SourceItem};
 use crate::config::{CaptureConfig, Pacing};
 
 /// Why a capture directory cannot be replayed.
@@ -174,6 +174,10 @@ impl FrameSource for ReplaySource {
             "original_source": self.dir.manifest().source,
         });
         manifest
+    }
+
+    fn depth_limit(&self) -> Option<DepthLimit> {
+        DepthLimit::of_manifest(self.dir.manifest())
     }
 }
 

@@ -27,7 +27,7 @@ use dear_v4l2::stream::{Buffer, CaptureStream};
 use ndarray::{Array2, Array3};
 
 use super::module::{ModuleCalibration, ModuleCalibrationError};
-use super::{sleep_unless, FrameSource, SourceItem};
+use super::{sleep_unless, DepthLimit, FrameSource, SourceItem};
 use crate::config::{node_format, NodeConfig, QSignConfig, V4lConfig};
 
 /// How long a node's thread waits for a buffer before looking at the stop flag.
@@ -108,6 +108,8 @@ pub struct V4lSource {
     description: String,
     /// What a recording of this module's stream says about it.
     manifest: CaptureManifest,
+    /// The calibration file's `max_range_m` or the modulation's unambiguous range, the nearer.
+    depth_limit: Option<DepthLimit>,
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
     next_index: u64,
@@ -297,6 +299,13 @@ impl V4lSource {
             calibration: module.initial_calibration(),
             description,
             manifest,
+            depth_limit: DepthLimit::nearer(
+                module.max_range_m.map(|max_m| DepthLimit {
+                    max_m,
+                    origin: format!("max_range_m in {cal_path}"),
+                }),
+                config.tof.modulation_hz.and_then(DepthLimit::unambiguous),
+            ),
             stop,
             threads,
             next_index: 0,
@@ -695,6 +704,10 @@ impl FrameSource for V4lSource {
 
     fn recording_manifest(&self) -> CaptureManifest {
         self.manifest.clone()
+    }
+
+    fn depth_limit(&self) -> Option<DepthLimit> {
+        self.depth_limit.clone()
     }
 }
 
