@@ -24,8 +24,13 @@
 #                     capture node is the RGB node (YUYV); deard (target/release, built first:
 #                     cargo build --release -p deard -p dear-cli -p dear-e2e-tests) captures
 #                     both with refine = "none" and a zero calibration, and dear-v4l-check must
-#                     receive exactly the fed depths; then vivid is unbound and bound again
-#                     (the nodes vanish and return) and frames must flow again
+#                     receive exactly the fed depths, with the fed block beyond the module's
+#                     max_range_m (4 m) published invalid; then vivid is unbound and bound
+#                     again (the nodes vanish and return) and frames must flow again. deard
+#                     opens the ToF node through a link the guest makes once the feeder
+#                     streams (the feeder cannot set the loop up on a node deard streams);
+#                     vivid's own pattern, whenever it comes, is beyond the 4 m range, published
+#                     invalid, and counted by the checker, not taken for a fed frame
 #
 # Environment: DEAR_VM_CACHE (default ~/.cache/dear/v4l2-vm: the kernel .deb and the prepared
 # kernel + decompressed modules, per kernel version), DEAR_VM_KERNEL (a Debian kernel ABI, e.g.

@@ -22,7 +22,13 @@
  *                                                 on), closes it and
  *                                                 keeps writing FILE's frames into OUT (forever,
  *                                                 or SECONDS), so another program (deard) can
- *                                                 capture them from CAP
+ *                                                 capture them from CAP. Prints "feeding ..."
+ *                                                 once OUT streams: from then on every CAP
+ *                                                 frame is a copy of a fed one (vivid keeps
+ *                                                 the last queued output buffer until another
+ *                                                 is queued; NBUF are kept queued, paced by
+ *                                                 vivid's output rate). CAP must not be
+ *                                                 streaming in another process yet (EBUSY)
  *
  * FOURCC is four characters, padded with spaces ("Y16 ", "GREY", "YUYV"); W x H must be a CEA/DMT
  * DV timing size vivid knows for the loop (640x480 is; the loop sets both HDMI ends to it).
@@ -58,7 +64,10 @@ static int xioctl(int fd, unsigned long req, void *arg)
 
 static void die(const char *what)
 {
-	fprintf(stderr, "capture_check: %s: %s\n", what, strerror(errno));
+	fprintf(stderr, "capture_check: %s: %s%s\n", what, strerror(errno),
+		errno == EBUSY ? " (another process streams the node: set the loop up before a"
+				 " capturer opens it)"
+			       : "");
 	exit(2);
 }
 

@@ -3,14 +3,27 @@
 //! millimetres, `--fed`) into vivid's video output, vivid loops them into its capture node,
 //! and `deard` captures that node with `refine = "none"` and a zero calibration on an identity
 //! registration — so each published depth must be one of the fed frames, to the millimetre,
-//! valid exactly where the fed frame is non-zero.
+//! valid exactly where the fed frame is non-zero and within the module's range
+//! (`--max-range-m`: fed depth beyond it must be published invalid).
 //!
-//! Receives `--count` frames and prints one line per frame (`frame <id> matches fed <k>` or
-//! the first differing pixel); exits 0 when every frame matched a fed frame, 1 when one did
-//! not, 3 when `--timeout-s` passed first. `--settle-frames N` tolerates up to N frames that
-//! match nothing *before* the first that matches (they are printed, not counted): right after
-//! vivid's nodes come back, its capture node delivers its own test pattern until the feeder's
-//! first buffer reaches it.
+//! Receives frames until `--count` of them were checked and prints one line per frame. Each
+//! frame is one of:
+//! - **fed k**: exactly fed frame k (counted);
+//! - **blank**: no valid depth at all. vivid's own test pattern (what its capture node gives
+//!   while no output buffer is looped in) lies wholly beyond the test module's range, so deard
+//!   publishes it invalid; with `--allow-blank` such frames are accepted anywhere, printed and
+//!   totalled, not counted (they say nothing about deard);
+//! - **history**: published before this client connected — the service keeps its latest frame
+//!   for late subscribers, and after a device loss that one predates the loss: printed, not
+//!   counted;
+//! - anything else — another size, a sample out of the publisher's order (its `sequence` must
+//!   increase within one `run_id`), depth that is neither fed nor blank — is a failure (counted; the first differing pixel and
+//!   the closest fed frame are printed).
+//!
+//! Exits 0 when `--count` fed frames arrived in order and nothing failed, 1 when a frame failed,
+//! 2 on a usage or connection error, 3 when `--timeout-s` passed first. The last line sums up:
+//! `dear-v4l-check: 4 fed frames in order, 0 failed, 0 blank (vivid's pattern), 1 from before
+//! this client`.
 
 use std::time::{Duration, Instant};
 
@@ -28,109 +41,179 @@ struct Args {
     width: usize,
     #[arg(long)]
     height: usize,
+    /// Frames to check: fed frames, plus failed ones.
     #[arg(long)]
     count: usize,
     #[arg(long, default_value_t = 60.0)]
     timeout_s: f64,
-    /// Frames matching no fed frame tolerated before the first one that matches.
-    #[arg(long, default_value_t = 0)]
-    settle_frames: usize,
+    /// The module's range (its calibration file's `max_range_m`): fed depth beyond it must be
+    /// published invalid.
+    #[arg(long)]
+    max_range_m: Option<f64>,
+    /// Accept frames without any valid depth (vivid's own pattern) anywhere.
+    #[arg(long)]
+    allow_blank: bool,
+}
+
+/// How many frames of each kind were seen.
+#[derive(Default)]
+struct Tally {
+    fed: usize,
+    failed: usize,
+    blank: usize,
+    history: usize,
+}
+
+impl Tally {
+    fn summary(&self) -> String {
+        format!(
+            "{} fed frames in order, {} failed, {} blank (vivid's pattern), {} from before this client",
+            self.fed, self.failed, self.blank, self.history
+        )
+    }
+}
+
+fn usage_error(message: String) -> ! {
+    eprintln!("dear-v4l-check: {message}");
+    std::process::exit(2)
 }
 
 fn main() {
     let args = Args::parse();
-    let bytes = std::fs::read(&args.fed).unwrap_or_else(|e| {
-        eprintln!("dear-v4l-check: {}: {e}", args.fed.display());
-        std::process::exit(2)
-    });
+    if args.width == 0 || args.height == 0 || args.count == 0 {
+        usage_error(format!(
+            "--width {}, --height {} and --count {} must be positive",
+            args.width, args.height, args.count
+        ));
+    }
+    if let Some(r) = args.max_range_m {
+        if !(r.is_finite() && r > 0.0) {
+            usage_error(format!(
+                "--max-range-m {r} must be a positive number of metres"
+            ));
+        }
+    }
+    let bytes = std::fs::read(&args.fed)
+        .unwrap_or_else(|e| usage_error(format!("{}: {e}", args.fed.display())));
     let n = args.width * args.height;
+    if bytes.is_empty() || bytes.len() % (n * 2) != 0 {
+        usage_error(format!(
+            "{}: {} bytes, not a whole number of {}x{} 16-bit frames",
+            args.fed.display(),
+            bytes.len(),
+            args.width,
+            args.height
+        ));
+    }
+    // What each fed frame must be published as: fed millimetres, 0 (invalid) beyond the range.
+    let max_mm = args.max_range_m.map(|r| r * 1000.0);
     let fed: Vec<Vec<u16>> = bytes
         .chunks_exact(n * 2)
         .map(|f| {
             f.chunks_exact(2)
                 .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                .map(|mm| match max_mm {
+                    Some(max) if f64::from(mm) > max => 0,
+                    _ => mm,
+                })
                 .collect()
         })
         .collect();
-    if fed.is_empty() {
-        eprintln!("dear-v4l-check: {}: no whole frame", args.fed.display());
-        std::process::exit(2);
-    }
-    let client = Client::connect(&args.service).unwrap_or_else(|e| {
-        eprintln!("dear-v4l-check: {e}");
-        std::process::exit(2)
-    });
+    let client = Client::connect(&args.service).unwrap_or_else(|e| usage_error(e.to_string()));
+    // Frames published before this instant were there before the client.
+    let connected_ns = dear_proto::time::monotonic_ns();
     let deadline = Instant::now() + Duration::from_secs_f64(args.timeout_s);
-    let mut received = 0;
-    let mut failed = false;
-    // Unmatched frames still tolerated: only until the first match.
-    let mut settling = args.settle_frames;
-    while received < args.count {
+    let mut tally = Tally::default();
+    // (publisher run id, sample sequence) of the last frame checked: strictly increasing
+    // within one publisher, unlike the frame id (which restarts when a replay loops).
+    let mut last: Option<(u64, u64)> = None;
+    while tally.fed + tally.failed < args.count {
         let Some(left) = deadline.checked_duration_since(Instant::now()) else {
+            println!("dear-v4l-check: {}", tally.summary());
             eprintln!(
-                "dear-v4l-check: {received} of {} frames before the timeout",
-                args.count
+                "dear-v4l-check: {} of {} frames checked before the timeout ({} s){}",
+                tally.fed + tally.failed,
+                args.count,
+                args.timeout_s,
+                if tally.blank > 0 {
+                    " — only vivid's own pattern came: is the feeder looping buffers in?"
+                } else {
+                    ""
+                }
             );
             std::process::exit(3);
         };
         let frame = match client.wait(left) {
             Ok(Some(frame)) => frame,
             Ok(None) => continue,
-            Err(e) => {
-                eprintln!("dear-v4l-check: {e}");
-                std::process::exit(2);
-            }
+            Err(e) => usage_error(e.to_string()),
         };
-        let id = frame.header().frame_id;
+        let header = *frame.header();
+        let id = header.frame_id;
+        if header.publish_timestamp_ns < connected_ns {
+            tally.history += 1;
+            println!("frame {id}: published before this client connected (not counted)");
+            continue;
+        }
         if frame.size() != (args.width, args.height) {
-            received += 1;
+            tally.failed += 1;
             println!(
                 "frame {id}: size {:?}, fed {}x{}",
                 frame.size(),
                 args.width,
                 args.height
             );
-            failed = true;
             continue;
         }
+        let (run, sequence) = (header.run_id, header.sequence);
+        if let Some((last_run, last_sequence)) = last {
+            if run != last_run || sequence <= last_sequence {
+                tally.failed += 1;
+                println!(
+                    "frame {id} (publisher {run:#x}, sample {sequence}) is out of order: it follows sample {last_sequence} of publisher {last_run:#x}"
+                );
+                continue;
+            }
+        }
+        last = Some((run, sequence));
         let depth = frame.depth();
-        match fed
+        if let Some(k) = fed
             .iter()
             .position(|f| first_difference(f, depth).is_none())
         {
-            Some(k) => {
-                received += 1;
-                settling = 0;
-                println!("frame {id} matches fed {k}");
+            tally.fed += 1;
+            println!("frame {id} matches fed {k}");
+        } else if depth.iter().all(|&m| m == 0.0) {
+            if args.allow_blank {
+                tally.blank += 1;
+                println!("frame {id}: no valid depth (vivid's own pattern, beyond the module's range; not counted)");
+            } else {
+                tally.failed += 1;
+                println!("frame {id}: no valid depth (vivid's own pattern?) where a fed frame was expected");
             }
-            None if settling > 0 => {
-                settling -= 1;
-                println!("frame {id} matches no fed frame yet (settling, not counted)");
-            }
-            None => {
-                received += 1;
-                // Report against the closest fed frame: the one with the fewest differences.
-                let (k, d) = fed
-                    .iter()
-                    .enumerate()
-                    .map(|(k, f)| (k, differences(f, depth)))
-                    .min_by_key(|(_, d)| *d)
-                    .expect("fed is not empty");
-                let (p, want, got) = first_difference(&fed[k], depth).expect("differs");
-                println!(
-                    "frame {id} matches no fed frame: closest fed {k} differs at {d} pixels, first at ({}, {}): fed {want} mm, published {got} m",
-                    p / args.width,
-                    p % args.width
-                );
-                failed = true;
-            }
+        } else {
+            tally.failed += 1;
+            // Report against the closest fed frame: the one with the fewest differences.
+            let (k, d) = fed
+                .iter()
+                .enumerate()
+                .map(|(k, f)| (k, differences(f, depth)))
+                .min_by_key(|(_, d)| *d)
+                .expect("fed is not empty");
+            let (p, want, got) = first_difference(&fed[k], depth).expect("differs");
+            println!(
+                "frame {id} matches no fed frame: closest fed {k} differs at {d} pixels, first at x {} y {}: expected {want} mm (0 = invalid), published {got} m",
+                p % args.width,
+                p / args.width
+            );
         }
     }
-    std::process::exit(i32::from(failed));
+    println!("dear-v4l-check: {}", tally.summary());
+    std::process::exit(i32::from(tally.failed > 0));
 }
 
-/// Published depth `m` (metres) agrees with fed millimetres `mm` at a pixel: both invalid, or
-/// the same millimetre.
+/// Published depth `m` (metres) agrees with the expected millimetres `mm` at a pixel: both
+/// invalid, or the same millimetre.
 fn agrees(mm: u16, m: f32) -> bool {
     if mm == 0 {
         m == 0.0
