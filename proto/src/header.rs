@@ -40,6 +40,10 @@ pub mod flags {
     /// negative, or moved far from the measurement on many pixels) and was not published: the
     /// depth is the classical filter's (`REFINED_CLASSICAL` is set, `REFINED_NETWORK` is not).
     pub const NETWORK_OUTPUT_REJECTED: u32 = 1 << 5;
+    /// The confidence plane holds expected-error codes (`crate::confidence`): the refiner
+    /// predicted each pixel's absolute depth error, `1 mm · 2^((255 − v)/16)`. Without this
+    /// flag the confidence is the heuristic support × agreement score.
+    pub const CONFIDENCE_EXPECTED_ERROR: u32 = 1 << 6;
 }
 
 /// Pipeline stages whose latency each frame reports, index into `stage_latency_us`.

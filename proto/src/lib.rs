@@ -5,7 +5,8 @@
 //! offsets the header gives:
 //! - aligned refined depth, `f32` metres, `width·height` values, row-major, `0` = invalid;
 //! - the RGB image it is aligned to, `u8`, `width·height·3`, row-major, interleaved R,G,B;
-//! - per-pixel confidence, `u8`, `width·height` (0 = invalid … 255 = measured and kept).
+//! - per-pixel confidence, `u8`, `width·height` (0 = invalid; with
+//!   [`flags::CONFIDENCE_EXPECTED_ERROR`] an expected-error code, see [`confidence`]).
 //!
 //! After each sample the daemon notifies an iceoryx2 *event* service of the same name, so
 //! clients can sleep until a frame arrives instead of polling.
@@ -13,6 +14,7 @@
 //! The README's "Frame layout" section documents the header byte by byte for C and Python
 //! clients; `tests/layout.rs` checks that table against this struct.
 
+pub mod confidence;
 pub mod header;
 pub mod service;
 pub mod time;
