@@ -123,8 +123,12 @@ def refine_apply_spec(net: RefineNet) -> dict | None:
     if net.variant == "gated":
         kind, channels = "gated-kernel", kpn.GATED_CHANNELS
         definition = upsample + "b = depth / max_depth_m; " + _GATED_DEFINITION
-    elif net.variant == "hybrid":
-        kind, channels = "hybrid-kernel", kpn.HYBRID_CHANNELS
+    elif net.variant in ("hybrid", "guarded"):
+        kind, channels = (
+            ("hybrid-kernel", kpn.HYBRID_CHANNELS)
+            if net.variant == "hybrid"
+            else ("guarded-kernel", kpn.GUARDED_CHANNELS)
+        )
         definition = (
             upsample
             + "d = depth / max_depth_m, c = classical / max_depth_m (the classical refiner's "
@@ -132,6 +136,14 @@ def refine_apply_spec(net: RefineNet) -> dict | None:
             "+ t * (c - d) where d > 0 and c > 0, d where only d > 0, c where only c > 0; "
             + _GATED_DEFINITION
         )
+        if net.variant == "guarded":
+            definition += (
+                "; that is the refined candidate r. Expected absolute errors (metres) e_k = "
+                "error_unit * max_depth_m * exp(clamp(maps[13 + k], -log_error_bound, "
+                "log_error_bound)) for k = 0 (r), 1 (d), 2 (c); each pixel publishes the "
+                "candidate with a positive depth and the smallest e_k (ties: r, then d, then c) "
+                "and e_k as its expected error; none positive: 0"
+            )
     else:
         return None
     spec = {
@@ -141,8 +153,11 @@ def refine_apply_spec(net: RefineNet) -> dict | None:
         "max_bias": kpn.GATED_MAX_BIAS,
         "range_scale": kpn.GATED_RANGE_SCALE,
     }
-    if net.variant == "hybrid":
+    if net.variant in ("hybrid", "guarded"):
         spec["jump_scale"] = kpn.HYBRID_JUMP_SCALE
+    if net.variant == "guarded":
+        spec["error_unit"] = kpn.GUARDED_ERROR_UNIT
+        spec["log_error_bound"] = kpn.GUARDED_LOG_ERROR_BOUND
     spec["definition"] = definition
     return spec
 
@@ -230,7 +245,16 @@ def graph_specs(variant: str) -> dict[str, dict]:
                         "refine_maps",
                         maps_channels,
                         "kernel logits (9), bias, gate and range log-sharpness"
-                        + (", trust in the classical estimate" if variant == "hybrid" else "")
+                        + (
+                            ", trust in the classical estimate"
+                            if variant in ("hybrid", "guarded")
+                            else ""
+                        )
+                        + (
+                            ", log expected error of the refined, measured and classical depth"
+                            if variant == "guarded"
+                            else ""
+                        )
                         + " at 1/stride resolution; applied by the daemon as "
                         "graphs.refine.apply says",
                     ),

@@ -7,6 +7,8 @@ contribute, so the networks are not taught to predict fabricated zeros.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 import torch.nn.functional as F
 
@@ -19,6 +21,11 @@ FLOWNET_WEIGHTS = {6: 0.32, 5: 0.08, 4: 0.02, 3: 0.01, 2: 0.005}
 FUSION_WEIGHTS = (0.005, 0.005, 0.005)
 #: λ of the depth gradient term.
 GRADIENT_WEIGHT = 10.0
+#: Weight of the ``guarded`` refiner's harm term: each metre by which the refinement is further
+#: from the truth than the measurement it was given costs this much on top of the L1 term.
+HARM_WEIGHT = 1.0
+#: Weight of the ``guarded`` refiner's expected-error likelihood (Laplace NLL, three maps).
+ERROR_NLL_WEIGHT = 0.05
 
 #: Sobel kernels. x: derivative along columns (positive when depth grows to the right);
 #: y: along rows (positive when depth grows downwards). The authors' TF code had the y kernel's
@@ -114,3 +121,43 @@ def depth_loss(
 def depth_l2_loss(pred: torch.Tensor, gt: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
     """Masked mean squared error (the DeepToF baseline's loss)."""
     return masked_mean((pred - gt) ** 2, valid)
+
+
+def laplace_nll(err: torch.Tensor, scale: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Masked mean of the Laplace negative log-likelihood ``|e| / b + log b`` (constant dropped):
+    a proper scoring rule for the scale ``b``, minimised by ``b = E[|e| | inputs]``, so a map
+    trained with it predicts the expected absolute error."""
+    return masked_mean(err / scale + torch.log(scale), mask)
+
+
+def guarded_losses(
+    r: dict[str, torch.Tensor],
+    gt: torch.Tensor,
+    depth_valid: torch.Tensor,
+    measured: torch.Tensor,
+    depth_term: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor],
+) -> dict[str, torch.Tensor]:
+    """The ``guarded`` refiner's loss parts (issue 33), depths in metres.
+
+    - ``depth``: ``depth_term`` (L1 + gradient) of the hybrid refinement where a measurement
+      was warped;
+    - ``harm``: ``HARM_WEIGHT ·`` mean of how much further from the truth the refinement is than
+      the measurement, where it is (a refiner must not make good depth worse);
+    - ``error``: ``ERROR_NLL_WEIGHT ·`` the Laplace NLL of each candidate's expected-error map
+      (refined, measurement, classical) wherever that candidate and the truth are valid. The
+      errors are detached: the maps learn to predict them, not to change the depth.
+    """
+    refined, d, c = r["depth_refined"], r["depth_warped"], r["depth_classical"]
+    errors = r["errors"]
+    e_refined = (refined - gt).abs()
+    e_measured = (d - gt).abs()
+    nll = (
+        laplace_nll(e_refined.detach(), errors[:, 0:1], depth_valid & (refined > 0))
+        + laplace_nll(e_measured, errors[:, 1:2], measured)
+        + laplace_nll((c - gt).abs(), errors[:, 2:3], depth_valid & (c > 0))
+    )
+    return {
+        "depth": depth_term(refined, gt, measured),
+        "harm": HARM_WEIGHT * masked_mean(F.relu(e_refined - e_measured), measured),
+        "error": ERROR_NLL_WEIGHT * nll,
+    }

@@ -56,3 +56,29 @@ def test_hybrid_fixture_matches_the_python_definition(
     assert apply is not None
     # The Rust test hard-codes these; the exporter writes them into model.json.
     assert (apply["max_bias"], apply["range_scale"], apply["jump_scale"]) == (0.05, 100.0, 300.0)
+
+
+def test_guarded_fixture_matches_the_python_definition(
+    fixture_maker: Callable[[Path], types.ModuleType],
+) -> None:
+    doc = json.loads((FIXTURE / "guarded.json").read_text())
+    make = fixture_maker(FIXTURE / "make_gated.py")
+    c = make.guarded_case()
+    for k in ("depth", "classical", "maps"):
+        np.testing.assert_array_equal(np.array(doc[k]["data"], np.float32), c[k].ravel())
+    out, log_err = make.expected_guarded(c["depth"], c["classical"], c["maps"])
+    want = np.array(doc["out"]["data"], np.float32).reshape(doc["out"]["shape"])
+    np.testing.assert_allclose(out, want, atol=1e-6)
+    want_err = np.array(doc["log_error"]["data"], np.float32).reshape(doc["log_error"]["shape"])
+    finite = want_err < 1e29
+    assert np.all(np.isinf(log_err[~finite])) and np.any(~finite)
+    np.testing.assert_allclose(log_err[finite], want_err[finite], atol=1e-6)
+    apply = refine_apply_spec(build_refine("edge", "guarded"))
+    assert apply is not None
+    # The Rust test hard-codes these; the exporter writes them into model.json.
+    assert (apply["jump_scale"], apply["error_unit"], apply["log_error_bound"]) == (
+        300.0,
+        1e-3,
+        6.0,
+    )
+    assert apply["channels"] == 16 and apply["kind"] == "guarded-kernel"

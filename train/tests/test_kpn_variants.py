@@ -2,13 +2,24 @@
 
 from __future__ import annotations
 
+import math
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
 
-from dear_train.losses import depth_loss
+from dear_train.losses import HARM_WEIGHT, depth_loss, guarded_losses
 from dear_train.models import build_refine
-from dear_train.models.kpn import KERNEL_EPS, FilterMode, KernelApply, filter_mode
+from dear_train.models.kpn import (
+    GUARDED_CHANNELS,
+    GUARDED_ERROR_UNIT,
+    KERNEL_EPS,
+    FilterMode,
+    GuardedKernelApply,
+    KernelApply,
+    filter_mode,
+)
 from dear_train.training.trainer import StageLoss
 
 H, W = 5, 6
@@ -258,3 +269,76 @@ def test_hybrid_refiner_starts_close_to_the_classical_output() -> None:
     assert (out - classical).abs().mean() < 0.3 * (depth - classical).abs().mean()
     with pytest.raises(ValueError, match="dear-synth classical"):
         net(torch.rand(1, 1, 48, 64), depth, torch.rand(1, 3, 48, 64))
+
+
+def _guarded_maps(err_refined: float, err_measured: float, err_classical: float) -> torch.Tensor:
+    """Guarded head maps (full resolution, 1×16×H×W): closed gate, neutral trust, and the three
+    expected errors (in ``GUARDED_ERROR_UNIT``s) given."""
+    maps = torch.zeros(1, GUARDED_CHANNELS, H, W)
+    maps[:, 10] = -20.0  # gate closed: the refined candidate is the hybrid blend
+    for k, e in enumerate((err_refined, err_measured, err_classical)):
+        maps[:, 13 + k] = math.log(e)
+    return maps
+
+
+def test_guarded_publishes_the_candidate_with_the_smallest_expected_error() -> None:
+    depth = torch.full((1, 1, H, W), 0.2)
+    classical = torch.full((1, 1, H, W), 0.3)
+    apply = GuardedKernelApply()
+    for errs, want in [((1.0, 2.0, 3.0), None), ((2.0, 1.0, 3.0), 0.2), ((3.0, 2.0, 1.0), 0.3)]:
+        published, err, refined = apply(depth, classical, _guarded_maps(*errs))
+        expected = refined if want is None else torch.full_like(depth, want)
+        torch.testing.assert_close(published, expected)
+        torch.testing.assert_close(err, torch.full_like(err, GUARDED_ERROR_UNIT * min(errs)))
+    # An invalid candidate is never published, however small its expected error; a pixel with
+    # none valid publishes 0 with an infinite expected error.
+    depth[0, 0, 1, 1] = 0.0
+    classical[0, 0, 2, 2] = 0.0
+    depth[0, 0, 3, 3] = classical[0, 0, 3, 3] = 0.0
+    published, err, _ = apply(depth, classical, _guarded_maps(3.0, 1.0, 2.0))
+    assert float(published[0, 0, 1, 1]) == pytest.approx(0.3)  # measurement invalid: classical
+    assert float(published[0, 0, 2, 2]) == pytest.approx(0.2)
+    assert float(published[0, 0, 3, 3]) == 0.0 and math.isinf(float(err[0, 0, 3, 3]))
+
+
+def test_guarded_losses_charge_harm_and_fit_expected_errors() -> None:
+    gt = torch.full((1, 1, H, W), 2.0)
+    measured = gt + 0.01
+    valid = torch.ones_like(gt, dtype=torch.bool)
+
+    def parts(refined: torch.Tensor, scale: float) -> dict[str, torch.Tensor]:
+        r = {
+            "depth_refined": refined,
+            "depth_warped": measured,
+            "depth_classical": gt - 0.01,
+            "errors": torch.full((1, 3, H, W), scale),
+        }
+        return guarded_losses(r, gt, valid, valid, lambda p, g, v: depth_loss(p, g, v, 0.0))
+
+    # A refinement closer to the truth than the measurement does no harm; one further away
+    # pays for every metre it adds.
+    assert float(parts(gt + 0.005, 0.01)["harm"]) == 0.0
+    assert float(parts(gt + 0.03, 0.01)["harm"]) == pytest.approx(0.02 * HARM_WEIGHT)
+    # The likelihood is lowest when the maps predict each candidate's mean |error|.
+    refined = gt + 0.01  # all three candidates are 0.01 m off
+    best = [float(parts(refined, s)["error"]) for s in (0.003, 0.01, 0.03)]
+    assert best[1] < best[0] and best[1] < best[2]
+
+
+def test_guarded_refiner_warm_starts_from_the_shipped_hybrid_bundle() -> None:
+    from dear_train.training.checkpoint import build_model, warm_start_refine
+    from dear_train.training.config import get_profile
+
+    bundle = Path(__file__).resolve().parents[2] / "models" / "edge"
+    model = build_model(get_profile("cpu-guarded"))
+    assert model.refine is not None
+    head_bias_before = model.refine.backbone.head.bias.detach().clone()
+    copied = warm_start_refine(model, bundle)
+    assert "backbone.head.weight" in copied and "backbone.enc0.0.0.weight" in copied
+    head = model.refine.backbone.head
+    # The grown head keeps its three expected-error maps' initialisation.
+    torch.testing.assert_close(head.bias.detach()[13:], head_bias_before[13:])
+    assert not torch.equal(head.bias.detach()[:13], head_bias_before[:13])
+    # A bundle whose refiner is not this network's is refused, naming the parameter.
+    with pytest.raises(ValueError, match="backbone"):
+        warm_start_refine(build_model(get_profile("cpu")), bundle)

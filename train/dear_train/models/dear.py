@@ -86,6 +86,18 @@ class DEAR(nn.Module):
         c_w = None
         if tof_classical is not None and uses_classical(self.refine.variant):
             c_w = warp_depth(tof_classical, flow)[0] / self.max_depth
+        if self.refine.variant == "guarded":
+            # Published depth, plus what the guarded variant's losses need (metres).
+            g = self.refine.forward_guarded(a_w, d_w / self.max_depth, rgb, c_w)
+            assert c_w is not None  # checked by forward_guarded
+            return {
+                "depth_warped": d_w,
+                "depth_warped_valid": d_valid,
+                "depth": g["depth"] * self.max_depth,
+                "depth_refined": g["refined"] * self.max_depth,
+                "depth_classical": c_w * self.max_depth,
+                "errors": g["errors"] * self.max_depth,
+            }
         d_out = self.refine(a_w, d_w / self.max_depth, rgb, c_w) * self.max_depth
         return {"depth_warped": d_w, "depth_warped_valid": d_valid, "depth": d_out}
 

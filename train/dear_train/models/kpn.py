@@ -24,10 +24,19 @@ The ``hybrid`` variant (:class:`HybridKernelApply`) also takes the classical ref
 estimate, then applies the gated kernel to that choice. Off its training distribution it can
 fall back to either, so it inherits the classical filter's robustness where the network is
 unsure and keeps the measurement where the measurement was already right.
+
+The ``guarded`` variant (:class:`GuardedKernelApply`, issue 33) is the hybrid refiner with three
+more maps: the expected absolute error of each candidate a pixel could publish — the hybrid
+refinement, the measurement, the classical estimate — trained with a Laplace likelihood (the
+proper scoring rule whose optimum is the conditional mean absolute error). Each pixel publishes
+the candidate with the smallest expected error, and that error, so a correction the evidence
+does not support falls back to the measurement (or the classical estimate), and the confidence
+plane is a calibrated expected error rather than a heuristic.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import torch
@@ -50,6 +59,7 @@ VARIANTS = (
     "deeptof",
     "gated",
     "hybrid",
+    "guarded",
 )
 
 #: Epsilon of the kernel normalisation ``Σ(|w| + ε)``.
@@ -80,6 +90,7 @@ def filter_mode(variant: str) -> FilterMode | None:
         "deeptof": None,
         "gated": None,
         "hybrid": None,
+        "guarded": None,
     }[variant]
 
 
@@ -89,6 +100,8 @@ def head_channels(variant: str) -> int:
         return GATED_CHANNELS
     if variant == "hybrid":
         return HYBRID_CHANNELS
+    if variant == "guarded":
+        return GUARDED_CHANNELS
     return 10 if filter_mode(variant) is not None else 1
 
 
@@ -98,13 +111,14 @@ def uses_rgb(variant: str) -> bool:
 
 
 def uses_classical(variant: str) -> bool:
-    """Whether the variant takes the classical refiner's output as an input (``hybrid``)."""
-    return variant == "hybrid"
+    """Whether the variant takes the classical refiner's output as an input (``hybrid``,
+    ``guarded``)."""
+    return variant in ("hybrid", "guarded")
 
 
 def applies_maps(variant: str) -> bool:
     """Whether the variant's graph ends at its head maps, applied by the daemon in Rust."""
-    return variant in ("gated", "hybrid")
+    return variant in ("gated", "hybrid", "guarded")
 
 
 def neighbourhood(x: torch.Tensor) -> torch.Tensor:
@@ -205,6 +219,52 @@ class HybridKernelApply(nn.Module):
         blended = depth + trust * (classical - depth)
         base = torch.where(d_ok & c_ok, blended, torch.where(d_ok, depth, classical))
         return self.gated(base, maps[:, :12])
+
+
+#: Channels of the ``guarded`` head: the 13 hybrid maps, then the log expected absolute error of
+#: the hybrid refinement, of the measurement and of the classical estimate.
+GUARDED_CHANNELS = 16
+#: Unit of the error maps: expected |error| = ``GUARDED_ERROR_UNIT · exp(clamp(m, ±GUARDED_LOG_ERROR_BOUND))``
+#: in normalised depth (× max_depth 10 m: 1 cm per unit).
+GUARDED_ERROR_UNIT = 1e-3
+#: Bound on the error maps' logits: expected errors from 0.025 mm to 4 m at max_depth 10 m.
+GUARDED_LOG_ERROR_BOUND = 6.0
+#: Candidates of a ``guarded`` pixel, in the order of their error maps (13, 14, 15).
+GUARDED_CANDIDATES = ("refined", "measurement", "classical")
+
+
+def guarded_errors(maps: torch.Tensor) -> torch.Tensor:
+    """Expected absolute errors ``(N, 3, H, W)`` (normalised depth) of the three candidates."""
+    log_err = maps[:, 13:16].clamp(-GUARDED_LOG_ERROR_BOUND, GUARDED_LOG_ERROR_BOUND)
+    return GUARDED_ERROR_UNIT * torch.exp(log_err)
+
+
+class GuardedKernelApply(nn.Module):
+    """The ``guarded`` refinement: the hybrid refinement ``R`` (:class:`HybridKernelApply`,
+    maps 0–12), the measurement ``D`` and the classical estimate ``C`` are each given an
+    expected absolute error ``e = GUARDED_ERROR_UNIT · exp(m)`` (maps 13, 14, 15); a pixel
+    publishes the valid candidate with the smallest ``e`` (ties: the earlier of R, D, C) and
+    that ``e`` as its expected error. No valid candidate: 0, error +inf.
+
+    ``forward`` returns ``(published, expected_error, refined)``.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.hybrid = HybridKernelApply()
+
+    def forward(
+        self, depth: torch.Tensor, classical: torch.Tensor, maps: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        refined = self.hybrid(depth, classical, maps[:, :HYBRID_CHANNELS])
+        err = guarded_errors(maps)
+        cands = torch.cat([refined, depth, classical], dim=1)
+        inf = torch.full_like(err, float("inf"))
+        err = torch.where(cands > 0, err, inf)
+        best_err, best = err.min(dim=1, keepdim=True)
+        published = torch.gather(cands, 1, best)
+        published = torch.where(torch.isfinite(best_err), published, torch.zeros_like(published))
+        return published, best_err, refined
 
 
 class KernelApply(nn.Module):
@@ -312,6 +372,7 @@ class RefineNet(nn.Module):
         self.apply_kernel = KernelApply(self.mode) if self.mode is not None else None
         self.apply_gated = GatedKernelApply() if variant == "gated" else None
         self.apply_hybrid = HybridKernelApply() if variant == "hybrid" else None
+        self.apply_guarded = GuardedKernelApply() if variant == "guarded" else None
         head = self.backbone.head
         # Small head weights (not zero, so gradients still reach the backbone at step one) and,
         # for the kernel variants, a bias making the initial kernel the identity: training
@@ -323,8 +384,11 @@ class RefineNet(nn.Module):
             head.bias.data[4] = 1.0
         if applies_maps(variant):
             head.bias.data[10] = GATED_GATE_INIT
-        if variant == "hybrid":
+        if variant in ("hybrid", "guarded"):
             head.bias.data[12] = HYBRID_TRUST_INIT
+        if variant == "guarded":
+            # Expected errors start at 5 units (5 cm at 10 m) for every candidate.
+            head.bias.data[13:16] = math.log(5.0)
 
     def _inputs(
         self,
@@ -367,7 +431,10 @@ class RefineNet(nn.Module):
         rgb: torch.Tensor | None = None,
         classical: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """Refined depth; ``classical`` (same units as ``depth``) only for ``hybrid``."""
+        """Refined depth; ``classical`` (same units as ``depth``) only for ``hybrid`` and
+        ``guarded`` (whose published depth this is: :meth:`forward_guarded` has the rest)."""
+        if self.apply_guarded is not None:
+            return self.forward_guarded(amplitude, depth, rgb, classical)["depth"]
         if applies_maps(self.variant):
             maps = self.head_maps(amplitude, depth, rgb, classical)
             full = resize_like(maps, depth, self.backbone.stride)
@@ -382,6 +449,30 @@ class RefineNet(nn.Module):
                 return depth + out
             return out
         return self.apply_kernel(depth, out[:, :9], out[:, 9:10])
+
+
+    def forward_guarded(
+        self,
+        amplitude: torch.Tensor,
+        depth: torch.Tensor,
+        rgb: torch.Tensor | None,
+        classical: torch.Tensor | None,
+    ) -> dict[str, torch.Tensor]:
+        """The ``guarded`` variant's outputs (normalised depth): ``depth`` (published),
+        ``expected_error`` (of the published depth), ``refined`` (the hybrid candidate) and
+        ``errors`` ``(N, 3, H, W)``, the expected errors of the three candidates."""
+        if self.apply_guarded is None:
+            raise ValueError(f"variant {self.variant!r} is not guarded")
+        maps = self.head_maps(amplitude, depth, rgb, classical)
+        full = resize_like(maps, depth, self.backbone.stride)
+        assert classical is not None  # checked by head_maps
+        published, err, refined = self.apply_guarded(depth, classical, full)
+        return {
+            "depth": published,
+            "expected_error": err,
+            "refined": refined,
+            "errors": guarded_errors(full),
+        }
 
 
 def paper_refine(variant: str = "kpn") -> RefineNet:

@@ -102,3 +102,51 @@ def load_model(path: Path) -> tuple[DEAR, Profile]:
     model.load_state_dict(ckpt["model"])
     model.eval()
     return model, profile
+
+
+def warm_start_refine(model: DEAR, bundle: Path) -> list[str]:
+    """Copy the refinement weights of a format-2 bundle's ``refine.onnx`` into ``model.refine``.
+
+    The exported graph keeps the parameters under their module names (``net.backbone.…``), so a
+    refiner whose head grew (``hybrid`` → ``guarded``: 13 → 16 maps) starts from the shipped
+    backbone and head; the head's extra channels keep their initialisation. Returns the names
+    copied. Raises ``ValueError`` when the file has none of the model's parameters or a shape
+    disagrees beyond a grown head.
+    """
+    import onnx
+    from onnx import numpy_helper
+
+    if model.refine is None:
+        raise ValueError("warm start: the model has no refinement net")
+    path = Path(bundle) / "refine.onnx"
+    if not path.is_file():
+        raise ValueError(f"warm start: {path} does not exist")
+    graph = onnx.load(str(path)).graph
+    weights = {
+        init.name.removeprefix("net."): torch.from_numpy(numpy_helper.to_array(init).copy())
+        for init in graph.initializer
+        if init.name.startswith("net.")
+    }
+    state = model.refine.state_dict()
+    copied = []
+    with torch.no_grad():
+        for name, w in weights.items():
+            if name not in state:
+                continue
+            target = state[name]
+            if w.shape == target.shape:
+                target.copy_(w)
+            elif name.startswith("backbone.head.") and w.shape[1:] == target.shape[1:]:
+                if w.shape[0] > target.shape[0]:
+                    raise ValueError(f"warm start: {path}: {name} has more maps than the model")
+                target[: w.shape[0]].copy_(w)
+            else:
+                raise ValueError(
+                    f"warm start: {path}: {name} is {tuple(w.shape)}, the model's "
+                    f"{tuple(target.shape)}"
+                )
+            copied.append(name)
+    if not copied:
+        raise ValueError(f"warm start: {path} holds none of the refinement net's parameters")
+    model.refine.load_state_dict(state)
+    return copied

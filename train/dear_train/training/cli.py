@@ -50,6 +50,13 @@ def main(argv: list[str] | None = None) -> None:
     )
     p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: auto)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoints/last.pt")
+    p.add_argument(
+        "--init-refine",
+        type=Path,
+        default=None,
+        help="start the refinement net from this bundle's refine.onnx (a grown head keeps its "
+        "extra maps' initialisation); ignored with --resume once a checkpoint exists",
+    )
     a = p.parse_args(argv)
     if not a.data and not a.synthetic:
         p.error("give --data CAPTURE_DIR... or --synthetic")
@@ -68,7 +75,7 @@ def main(argv: list[str] | None = None) -> None:
         finals = train_side_by_side(profile, a.variants, data, a.out, a.device, a.resume)
         print(json.dumps({"out": str(a.out), "final_validation": finals}, indent=2))
         return
-    metrics = Trainer(profile, data, a.out, a.device, a.resume).run()
+    metrics = Trainer(profile, data, a.out, a.device, a.resume, a.init_refine).run()
     print(json.dumps({"out": str(a.out), "final_validation": metrics}, indent=2))
 
 

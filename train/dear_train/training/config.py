@@ -15,6 +15,9 @@ Profiles:
 - ``cpu-hybrid``: cpu-gated's recipe for the ``hybrid`` variant (the gated kernel on a learned
   per-pixel choice between the measurement and the classical filter); its captures need the
   classical planes (``dear-synth classical``).
+- ``cpu-guarded``: cpu-gated's recipe for the ``guarded`` variant (the hybrid refiner plus
+  expected-error maps: each pixel publishes the candidate, refined / measured / classical, with
+  the smallest expected error), on the ``broad`` family.
 - ``cpu-ablation``: cpu-gated on a 4-epoch schedule, for the variants trained side by side.
 - ``gpu``: the paper's recipe: paper tier, Adam, batch 3, crops 384×512, lr 4e-4 (1e-5 for the
   fine-tune), ×0.7 every 2 epochs; 20 + 20 + 40 + 10 epochs.
@@ -139,6 +142,17 @@ PROFILES: dict[str, Profile] = {
     ),
     "cpu-gated": CPU_GATED,
     "cpu-hybrid": replace(CPU_GATED, name="cpu-hybrid", variant="hybrid"),
+    # Issue 33: the hybrid refiner with expected-error maps and the harm term (``guarded``),
+    # trained on the ``broad`` family (bright single-bounce scenes and near-empty rooms too),
+    # warm-started from the shipped hybrid refiner (``dear-train --init-refine models/edge``):
+    # a shorter schedule at half the learning rate.
+    "cpu-guarded": replace(
+        CPU_GATED,
+        name="cpu-guarded",
+        variant="guarded",
+        stages=(Stage("refine", 6, 5e-4),),
+        lr_decay_every=2,
+    ),
     # The paper's ablation rows (Tables 2/3) and the shipped variant, trained side by side on
     # identical batches (``dear-train --variants``): cpu-gated's data, crops and optimiser on a
     # 4-epoch schedule (six variants: about 20 min per epoch while builds shared the 2 cores;

@@ -20,6 +20,7 @@ from dear_train.losses import (
     depth_l2_loss,
     depth_loss,
     flownet_weights,
+    guarded_losses,
     multiscale_flow_loss,
 )
 from dear_train.models.dear import DEAR
@@ -31,6 +32,7 @@ from dear_train.training.checkpoint import (
     load_resumable,
     save_atomic,
     training_state,
+    warm_start_refine,
 )
 from dear_train.training.config import Profile
 from dear_train.training.curves import plot_history
@@ -78,7 +80,11 @@ class StageLoss(nn.Module):
             # invent it where none maps (the daemon publishes 0 there). Counting holes taught
             # the gated refiner to lower all depth by its largest bias, shrinking the step at
             # every hole edge that the gradient term saw.
-            parts["depth"] = self._depth(r["depth"], gt, depth_valid & r["depth_warped_valid"])
+            measured = depth_valid & r["depth_warped_valid"]
+            if self.variant == "guarded":
+                parts.update(guarded_losses(r, gt, depth_valid, measured, self._depth))
+            else:
+                parts["depth"] = self._depth(r["depth"], gt, measured)
         else:
             assert m.flow is not None
             if self.stage == "flow":
@@ -168,6 +174,7 @@ class Trainer:
         out_dir: Path,
         device: str | None = None,
         resume: bool = False,
+        init_refine: Path | None = None,
     ) -> None:
         self.profile = profile
         self.data = [Path(d) for d in data]
@@ -187,6 +194,13 @@ class Trainer:
             self.history = ckpt["history"]
             self.position = (ckpt["stage_index"], ckpt["next_epoch"])
             self.resume_state = ckpt
+        elif init_refine is not None:
+            copied = warm_start_refine(self.model, init_refine)
+            if self.dist.is_main:
+                self.out.mkdir(parents=True, exist_ok=True)
+                (self.out / "init_refine.json").write_text(
+                    json.dumps({"bundle": str(init_refine), "parameters": copied}, indent=2)
+                )
 
     def _loader(self, dataset: DearDataset, shuffle: bool) -> DataLoader:
         sampler = (
