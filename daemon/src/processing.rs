@@ -604,6 +604,9 @@ impl Publish<'_> {
             None => flags::ALIGNED | flags::REFINED_NETWORK,
             Some(_) => flags::ALIGNED | flags::REFINED_CLASSICAL | flags::NETWORK_OUTPUT_REJECTED,
         };
+        if report.confidence_is_expected_error {
+            header.flags |= flags::CONFIDENCE_EXPECTED_ERROR;
+        }
         self.health
             .record(index, self.bundle_name, report.rejected_refinement.as_ref());
         if report.ran_flow_network || delivered.is_some() {

@@ -204,6 +204,7 @@ fn bench_gated_tail(c: &mut Criterion) {
         range_scale: 100.0,
         max_depth_m: 10.0,
         jump_scale: None,
+        errors: None,
     };
     let mut out = Array2::zeros((H, W));
     let mut group = c.benchmark_group("dear_chain_vga");

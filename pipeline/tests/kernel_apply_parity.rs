@@ -1,12 +1,13 @@
-//! The gated and hybrid refiners' tails in Rust (`model::kernel_apply`) against PyTorch
-//! (`fixtures/kernel_apply/{gated,hybrid}.json`, made by `make_gated.py` beside them).
+//! The gated, hybrid and guarded refiners' tails in Rust (`model::kernel_apply`) against
+//! PyTorch (`fixtures/kernel_apply/{gated,hybrid,guarded}.json`, made by `make_gated.py`).
 
 #![cfg(feature = "inference")]
 
 mod common;
 
 use dear_pipeline::model::kernel_apply::{
-    apply_gated, blend_classical, GatedKernel, GATED_CHANNELS, HYBRID_CHANNELS,
+    apply_gated, blend_classical, select_guarded, ErrorMaps, GatedKernel, GATED_CHANNELS,
+    GUARDED_CHANNELS, HYBRID_CHANNELS,
 };
 use ndarray::{Array2, Array3};
 
@@ -26,6 +27,7 @@ fn gated_tail_matches_pytorch() {
         range_scale: 100.0,
         max_depth_m: doc["max_depth_m"].as_f64().unwrap() as f32,
         jump_scale: None,
+        errors: None,
     };
     let mut out = Array2::zeros(depth.dim());
     apply_gated(&maps, depth.view(), out.view_mut(), &kernel);
@@ -72,6 +74,7 @@ fn hybrid_tail_matches_pytorch() {
         range_scale: 100.0,
         max_depth_m: doc["max_depth_m"].as_f64().unwrap() as f32,
         jump_scale: Some(300.0),
+        errors: None,
     };
     let mut base = Array2::zeros(depth.dim());
     let mut out = Array2::zeros(depth.dim());
@@ -105,5 +108,83 @@ fn hybrid_tail_matches_pytorch() {
     assert!(
         followed_jumps > 5 && filled > 5,
         "{followed_jumps} jumps, {filled} fills"
+    );
+}
+
+#[test]
+fn guarded_tail_matches_pytorch() {
+    let doc = fixture("guarded.json");
+    let depth = plane(&doc["depth"]);
+    let classical = plane(&doc["classical"]);
+    let (ms, md) = common::f32_array(&doc["maps"]);
+    assert_eq!(ms[0], GUARDED_CHANNELS);
+    let maps3 = Array3::from_shape_vec((ms[0], ms[1], ms[2]), md).unwrap();
+    let maps: Vec<Array2<f32>> = maps3.outer_iter().map(|m| m.to_owned()).collect();
+    let want = plane(&doc["out"]);
+    let want_log_error = plane(&doc["log_error"]);
+    let kernel = GatedKernel {
+        stride: doc["stride"].as_u64().unwrap() as usize,
+        max_bias: 0.05,
+        range_scale: 100.0,
+        max_depth_m: doc["max_depth_m"].as_f64().unwrap() as f32,
+        jump_scale: Some(300.0),
+        errors: Some(ErrorMaps {
+            unit: common::f32_array(&doc["error_unit"]).1[0],
+            log_bound: 6.0,
+        }),
+    };
+    let mut base = Array2::zeros(depth.dim());
+    let mut out = Array2::zeros(depth.dim());
+    let mut log_error = Array2::zeros(depth.dim());
+    blend_classical(
+        &maps,
+        depth.view(),
+        classical.view(),
+        base.view_mut(),
+        &kernel,
+    );
+    apply_gated(&maps, base.view(), out.view_mut(), &kernel);
+    let refined = out.clone();
+    select_guarded(
+        &maps,
+        depth.view(),
+        classical.view(),
+        out.view_mut(),
+        log_error.view_mut(),
+        &kernel,
+    );
+    let mut worst = (0.0f32, 0.0f32);
+    for (((got, want), got_e), want_e) in out.iter().zip(&want).zip(&log_error).zip(&want_log_error)
+    {
+        worst.0 = worst.0.max((got - want).abs());
+        if *want_e >= 1e29 {
+            assert!(got_e.is_infinite() && *got == 0.0, "nothing to publish");
+        } else {
+            worst.1 = worst.1.max((got_e - want_e).abs());
+        }
+    }
+    println!(
+        "guarded tail vs PyTorch: max |Δ depth| = {:.2e} m, max |Δ ln error| = {:.2e}",
+        worst.0, worst.1
+    );
+    assert!(worst.0 < 1e-5 && worst.1 < 1e-5, "{worst:?}");
+    // Every candidate is published somewhere, and nothing where no candidate is valid.
+    let count = |f: &dyn Fn(usize) -> bool| (0..out.len()).filter(|&i| f(i)).count();
+    let (o, r, d, c) = (
+        out.as_slice().unwrap(),
+        refined.as_slice().unwrap(),
+        depth.as_slice().unwrap(),
+        classical.as_slice().unwrap(),
+    );
+    let took_refined = count(&|i| o[i] == r[i] && r[i] != d[i] && r[i] != c[i]);
+    let took_measured = count(&|i| o[i] == d[i] && d[i] > 0.0 && r[i] != d[i]);
+    let took_classical = count(&|i| o[i] == c[i] && c[i] > 0.0 && r[i] != c[i] && d[i] != c[i]);
+    assert!(
+        took_refined > 20 && took_measured > 20 && took_classical > 20,
+        "refined {took_refined}, measured {took_measured}, classical {took_classical}"
+    );
+    assert!(
+        count(&|i| d[i] == 0.0 && c[i] == 0.0) > 0,
+        "the case has empty pixels"
     );
 }

@@ -95,7 +95,7 @@ type Edit = Box<dyn Fn(&mut serde_json::Value)>;
 
 #[test]
 fn malformed_apply_entries_are_refused_by_name() {
-    let cases: [(&str, Edit); 7] = [
+    let cases: [(&str, Edit); 10] = [
         (
             "apply.kind \"sharpen\"",
             Box::new(|m| m["graphs"]["refine"]["apply"]["kind"] = "sharpen".into()),
@@ -105,8 +105,25 @@ fn malformed_apply_entries_are_refused_by_name() {
             Box::new(|m| m["graphs"]["refine"]["apply"]["kind"] = "hybrid-kernel".into()),
         ),
         (
-            "apply.jump_scale belongs to \"hybrid-kernel\" only",
+            "apply.jump_scale belongs to \"hybrid-kernel\" and \"guarded-kernel\", not \"gated-kernel\"",
             Box::new(|m| m["graphs"]["refine"]["apply"]["jump_scale"] = 300.0.into()),
+        ),
+        (
+            "apply.error_unit belongs to \"guarded-kernel\", not \"gated-kernel\"",
+            Box::new(|m| m["graphs"]["refine"]["apply"]["error_unit"] = 0.001.into()),
+        ),
+        (
+            "a guarded-kernel head has 16",
+            Box::new(|m| m["graphs"]["refine"]["apply"]["kind"] = "guarded-kernel".into()),
+        ),
+        (
+            "apply.error_unit is required for \"guarded-kernel\"",
+            Box::new(|m| {
+                let a = &mut m["graphs"]["refine"]["apply"];
+                a["kind"] = "guarded-kernel".into();
+                a["channels"] = 16.into();
+                a["jump_scale"] = 300.0.into();
+            }),
         ),
         (
             "apply.stride 3",

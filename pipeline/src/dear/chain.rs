@@ -22,7 +22,7 @@ use ndarray::{Array2, ArrayView2, ArrayView3, ArrayViewMut2, Zip};
 
 use crate::align::StaticAligner;
 use crate::calibration::Calibration;
-use crate::dear::confidence::confidence_into;
+use crate::dear::confidence::{confidence_into, expected_error_confidence_into};
 use crate::dear::output_guard::{OutputGuard, RefinementCheck};
 use crate::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
 use crate::direct::{estimate_calibration_direct, DirectFitParams};
@@ -196,6 +196,10 @@ pub struct ChainReport {
     /// `Some` when the output guard rejected the refinement network's output on this frame:
     /// the published depth and confidence are then the classical filter's.
     pub rejected_refinement: Option<RefinementCheck>,
+    /// Whether the published confidence holds expected-error codes
+    /// (`dear_proto::confidence`): a guarded refiner's output was published. Otherwise it is
+    /// the heuristic score of [`confidence_into`].
+    pub confidence_is_expected_error: bool,
     /// Stage timings.
     pub timings: StageTimings,
 }
@@ -918,10 +922,16 @@ impl BackEnd<'_> {
             .output_guard
             .is_some_and(|guard| guard.rejects(&check))
             .then_some(check);
+        let expected_error = self.runner.expected_log_error();
+        let confidence_is_expected_error =
+            rejected_refinement.is_none() && expected_error.is_some();
         match (rejected_refinement, &staged.classical) {
-            (None, _) => {
-                confidence_into(depth_warped.view(), self.refined.view(), out_confidence);
-            }
+            (None, _) => match expected_error {
+                Some(log_error) => {
+                    expected_error_confidence_into(out_depth.view(), log_error, out_confidence)
+                }
+                None => confidence_into(depth_warped.view(), self.refined.view(), out_confidence),
+            },
             // A hybrid refiner's classical stage already filtered this frame.
             (Some(_), Some((depth, confidence))) => {
                 out_depth.assign(depth);
@@ -950,6 +960,7 @@ impl BackEnd<'_> {
             amplitude_scale: prepared.amplitude_scale,
             alignment,
             rejected_refinement,
+            confidence_is_expected_error,
             timings: t,
         })
     }

@@ -25,6 +25,40 @@ use rayon::prelude::*;
 use crate::geometry::surface::{is_valid_depth, is_valid_depth_branchless, surface_tolerance};
 use crate::vector_math::{exp_fast, floor_small, window3x3};
 
+/// Writes the expected-error codes (`dear_proto::confidence`) of a guarded refiner's
+/// `published` depth into `out`: `code_for_log_error(log_error)` where the depth is valid, 0
+/// where it is not. `log_error` is `ln` of the expected absolute error in metres
+/// (`BundleRunner::expected_log_error`).
+///
+/// # Panics
+/// If the three images do not share one shape.
+pub fn expected_error_confidence_into(
+    published: ArrayView2<f32>,
+    log_error: ArrayView2<f32>,
+    mut out: ArrayViewMut2<u8>,
+) {
+    assert_eq!(
+        published.dim(),
+        log_error.dim(),
+        "depth and error shapes differ"
+    );
+    assert_eq!(
+        published.dim(),
+        out.dim(),
+        "confidence and depth shapes differ"
+    );
+    Zip::from(&mut out)
+        .and(&published)
+        .and(&log_error)
+        .par_for_each(|o, &z, &e| {
+            *o = if is_valid_depth(z) {
+                dear_proto::confidence::code_for_log_error(e)
+            } else {
+                0
+            };
+        });
+}
+
 /// Writes the confidence of `refined` given the refinement input `warped` into `out`.
 ///
 /// Rows run in parallel on flat slices (non-contiguous inputs are copied once into standard

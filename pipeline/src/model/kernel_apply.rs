@@ -26,6 +26,17 @@ pub const GATED_CHANNELS: usize = 12;
 /// Head channels of the hybrid refiner: the gated refiner's 12, then the trust-in-classical
 /// logit.
 pub const HYBRID_CHANNELS: usize = 13;
+/// Head channels of the guarded refiner: the hybrid's 13, then the log expected error of the
+/// refined depth, the measurement and the classical estimate ([`select_guarded`]).
+pub const GUARDED_CHANNELS: usize = 16;
+
+/// A guarded refiner's expected-error maps: logit `m` stands for the expected absolute error
+/// `unit · max_depth · e^{clamp(m, ±log_bound)}` metres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ErrorMaps {
+    pub unit: f32,
+    pub log_bound: f32,
+}
 
 /// The constants of one gated refiner (from its manifest).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -34,8 +45,10 @@ pub struct GatedKernel {
     pub max_bias: f32,
     pub range_scale: f32,
     pub max_depth_m: f32,
-    /// `Some` for a hybrid refiner ([`blend_classical`]): its `jump_scale`.
+    /// `Some` for a hybrid or guarded refiner ([`blend_classical`]): its `jump_scale`.
     pub jump_scale: Option<f32>,
+    /// `Some` for a guarded refiner ([`select_guarded`]).
+    pub errors: Option<ErrorMaps>,
 }
 
 impl GatedKernel {
@@ -46,6 +59,10 @@ impl GatedKernel {
             range_scale: apply.range_scale,
             max_depth_m,
             jump_scale: apply.jump_scale,
+            errors: apply
+                .error_unit
+                .zip(apply.log_error_bound)
+                .map(|(unit, log_bound)| ErrorMaps { unit, log_bound }),
         }
     }
 }
@@ -188,7 +205,10 @@ pub fn blend_classical(
     mut base: ArrayViewMut2<f32>,
     k: &GatedKernel,
 ) {
-    assert_eq!(maps.len(), HYBRID_CHANNELS, "hybrid maps: 13 planes");
+    assert!(
+        maps.len() >= HYBRID_CHANNELS,
+        "hybrid maps: 13 planes (a guarded head's 14th–16th are read by select_guarded)"
+    );
     let jump = k.jump_scale.expect("blend_classical needs a hybrid kernel") / k.max_depth_m;
     let (h, w) = depth.dim();
     assert_eq!(classical.dim(), (h, w), "classical shape");
@@ -224,6 +244,146 @@ pub fn blend_classical(
                 }
             },
         );
+}
+
+/// The guarded refiner's last step (`GuardedKernelApply` in kpn.py). `published` holds the
+/// hybrid refinement `r` on entry; per pixel, of the candidates with a valid depth — `r`, the
+/// measurement `d`, the classical estimate `c` — the one whose expected-error logit (maps 13,
+/// 14, 15, upsampled like the others, clamped to ±`log_bound`) is smallest is published (ties:
+/// `r`, then `d`, then `c`), and `ln` of its expected error in metres goes to `log_error`
+/// (`+∞` where no candidate is valid: the depth is then 0). The comparison is made on the
+/// logits, which order the errors as the errors themselves do, so no exponential is taken.
+/// A non-finite logit (a corrupt model) disqualifies its candidate; a pixel left without one
+/// keeps the measurement.
+///
+/// # Panics
+/// When `maps` has fewer than [`GUARDED_CHANNELS`] planes, the planes differ in shape from
+/// `depth`, or `k` is not a guarded kernel.
+pub fn select_guarded(
+    maps: &[Array2<f32>],
+    depth: ArrayView2<f32>,
+    classical: ArrayView2<f32>,
+    mut published: ArrayViewMut2<f32>,
+    mut log_error: ArrayViewMut2<f32>,
+    k: &GatedKernel,
+) {
+    assert!(maps.len() >= GUARDED_CHANNELS, "guarded maps: 16 planes");
+    let errors = k.errors.expect("select_guarded needs a guarded kernel");
+    let (h, w) = depth.dim();
+    for (name, dim) in [
+        ("classical", classical.dim()),
+        ("published", published.dim()),
+        ("log_error", log_error.dim()),
+    ] {
+        assert_eq!(dim, (h, w), "{name} shape");
+    }
+    let error_maps = standard_layout(&maps[HYBRID_CHANNELS..GUARDED_CHANNELS]);
+    let error_maps = &error_maps[..];
+    let (h4, w4) = error_maps[0].dim();
+    assert!(
+        h4 * k.stride >= h && w4 * k.stride >= w,
+        "maps {h4}x{w4} at stride {} do not cover {h}x{w}",
+        k.stride
+    );
+    let log_unit = (errors.unit * k.max_depth_m).ln();
+    let ys = taps(h, h4, k.stride);
+    published
+        .axis_iter_mut(Axis(0))
+        .into_par_iter()
+        .zip(log_error.axis_iter_mut(Axis(0)))
+        .zip(depth.axis_iter(Axis(0)))
+        .zip(classical.axis_iter(Axis(0)))
+        .enumerate()
+        .for_each_init(
+            || (vec![0.0f32; w4], vec![0.0f32; 3 * w], vec![0.0f32; 2 * w]),
+            |(low, full, rows), (y, (((mut out, mut err), d_row), c_row))| {
+                let (y0, y1, fy) = ys[y];
+                for (m, full) in error_maps.iter().zip(full.chunks_exact_mut(w)) {
+                    lerp_rows(map_row(m, y0), map_row(m, y1), fy, low);
+                    upsample_row(low, k.stride, full);
+                }
+                let (d_row, c_row) = (contiguous(&d_row), contiguous(&c_row));
+                let (mr, rest) = full.split_at(w);
+                let (md, mc) = rest.split_at(w);
+                let logits = GuardedLogits {
+                    refined: mr,
+                    measured: md,
+                    classical: mc,
+                };
+                let bound = errors.log_bound;
+                match (out.as_slice_mut(), err.as_slice_mut()) {
+                    (Some(o), Some(e)) => {
+                        guarded_row(o, e, &d_row, &c_row, logits, bound, log_unit)
+                    }
+                    _ => {
+                        // Strided views: through a contiguous copy of the row.
+                        let (out_row, err_row) = rows.split_at_mut(w);
+                        out_row
+                            .iter_mut()
+                            .zip(out.iter())
+                            .for_each(|(o, r)| *o = *r);
+                        guarded_row(out_row, err_row, &d_row, &c_row, logits, bound, log_unit);
+                        out.iter_mut().zip(&*out_row).for_each(|(o, v)| *o = *v);
+                        err.iter_mut().zip(&*err_row).for_each(|(o, v)| *o = *v);
+                    }
+                }
+            },
+        );
+}
+
+/// One row of the three expected-error logits of [`select_guarded`], full resolution.
+#[derive(Clone, Copy)]
+struct GuardedLogits<'a> {
+    refined: &'a [f32],
+    measured: &'a [f32],
+    classical: &'a [f32],
+}
+
+/// One row of [`select_guarded`] (`out`: the refined row on entry), written with selects so
+/// that it vectorises.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
+fn guarded_row(
+    out: &mut [f32],
+    log_error: &mut [f32],
+    d_row: &[f32],
+    c_row: &[f32],
+    m: GuardedLogits<'_>,
+    bound: f32,
+    log_unit: f32,
+) {
+    let pixels = out
+        .iter_mut()
+        .zip(log_error.iter_mut())
+        .zip(d_row.iter().zip(c_row))
+        .zip(m.refined.iter().zip(m.measured).zip(m.classical));
+    for (((o, e), (&d, &c)), ((&mr, &md), &mc)) in pixels {
+        let r = *o;
+        // A candidate's logit, or +∞ when its depth is invalid or its logit is not finite.
+        let logit = |z: f32, m: f32| {
+            let ok = is_valid_depth_branchless(z) & m.is_finite();
+            if ok {
+                m.clamp(-bound, bound)
+            } else {
+                f32::INFINITY
+            }
+        };
+        let (lr, ld, lc) = (logit(r, mr), logit(d, md), logit(c, mc));
+        let d_or_c = if ld <= lc { d } else { c };
+        let l_d_or_c = ld.min(lc);
+        let take_r = lr <= l_d_or_c;
+        let best = if take_r { lr } else { l_d_or_c };
+        let value = if take_r { r } else { d_or_c };
+        let chosen = best < f32::INFINITY;
+        // No candidate: the measurement where there is one (only a corrupt map gets here
+        // with one), else no depth.
+        let fallback = if is_valid_depth_branchless(d) { d } else { 0.0 };
+        *o = if chosen { value } else { fallback };
+        *e = if chosen {
+            best + log_unit
+        } else {
+            f32::INFINITY
+        };
+    }
 }
 
 /// The maps in standard layout (borrowed: the runner's maps already are), so that a map row
@@ -402,6 +562,7 @@ mod tests {
             range_scale: 100.0,
             max_depth_m: 10.0,
             jump_scale: None,
+            errors: None,
         }
     }
 
@@ -499,6 +660,54 @@ mod tests {
         (0..HYBRID_CHANNELS)
             .map(|c| Array2::from_elem((2, 2), if c == 12 { trust } else { 0.0 }))
             .collect()
+    }
+
+    /// 16 maps at 1/4 of 8×8: the hybrid's (`hybrid_maps(0)`), then constant error logits.
+    fn guarded_maps(refined: f32, measured: f32, classical: f32) -> Vec<Array2<f32>> {
+        let mut maps = hybrid_maps(0.0);
+        for v in [refined, measured, classical] {
+            maps.push(Array2::from_elem((2, 2), v));
+        }
+        maps
+    }
+
+    #[test]
+    fn guarded_selection_falls_back_to_the_measurement_on_a_corrupt_map() {
+        let k = GatedKernel {
+            errors: Some(ErrorMaps {
+                unit: 1e-3,
+                log_bound: 6.0,
+            }),
+            ..hybrid()
+        };
+        let depth = Array2::from_elem((8, 8), 2.0f32);
+        let classical = Array2::from_elem((8, 8), 2.5f32);
+        let refined = Array2::from_elem((8, 8), 2.2f32);
+        let run = |maps: &[Array2<f32>]| {
+            let (mut out, mut err) = (refined.clone(), Array2::zeros((8, 8)));
+            select_guarded(
+                maps,
+                depth.view(),
+                classical.view(),
+                out.view_mut(),
+                err.view_mut(),
+                &k,
+            );
+            (out, err)
+        };
+        // The smallest logit wins; its error is unit · max_depth · e^logit (clamped to ±6).
+        let (out, err) = run(&guarded_maps(1.0, 0.5, 9.0));
+        assert!(out.iter().all(|&v| v == 2.0));
+        assert!(err.iter().all(|&e| (e - (0.01f32.ln() + 0.5)).abs() < 1e-6));
+        let (out, err) = run(&guarded_maps(-9.0, 0.5, 9.0));
+        assert!(out.iter().all(|&v| v == 2.2));
+        assert!(err.iter().all(|&e| (e - (0.01f32.ln() - 6.0)).abs() < 1e-6));
+        // A NaN or infinite logit disqualifies its candidate; all three: the measurement.
+        let (out, _) = run(&guarded_maps(f32::NAN, f32::INFINITY, 2.0));
+        assert!(out.iter().all(|&v| v == 2.5));
+        let (out, err) = run(&guarded_maps(f32::NAN, f32::NAN, f32::NAN));
+        assert!(out.iter().all(|&v| v == 2.0));
+        assert!(err.iter().all(|e| e.is_infinite()));
     }
 
     #[test]

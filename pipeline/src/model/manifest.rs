@@ -80,21 +80,29 @@ pub struct GraphSpec {
 /// definition beside these numbers).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RefineApply {
-    /// `"gated-kernel"` (12 maps applied to the warped depth) or `"hybrid-kernel"` (13 maps:
+    /// `"gated-kernel"` (12 maps applied to the warped depth), `"hybrid-kernel"` (13 maps:
     /// a per-pixel choice between the warped depth and the classical refiner's output, then
-    /// the gated kernel); see [`ApplyKind`].
+    /// the gated kernel) or `"guarded-kernel"` (16 maps: the hybrid's, then the expected error
+    /// of each candidate); see [`ApplyKind`].
     pub kind: String,
     /// Upsampling factor of the maps (2, 4 or 8; divides `input_size_multiple`).
     pub stride: usize,
-    /// 12 for `gated-kernel`, 13 for `hybrid-kernel`.
+    /// 12 for `gated-kernel`, 13 for `hybrid-kernel`, 16 for `guarded-kernel`.
     pub channels: usize,
     /// Largest depth correction, normalised depth.
     pub max_bias: f32,
     /// Scale of the depth-range attenuation of the kernel weights.
     pub range_scale: f32,
-    /// `hybrid-kernel` only: trust-logit added per unit of normalised |classical − depth|.
+    /// `hybrid-kernel` and `guarded-kernel`: trust-logit added per unit of normalised
+    /// |classical − depth|.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub jump_scale: Option<f32>,
+    /// `guarded-kernel` only: expected error (normalised depth) of an error-map logit of 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_unit: Option<f32>,
+    /// `guarded-kernel` only: the error-map logits are clamped to ±this.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub log_error_bound: Option<f32>,
 }
 
 /// The kinds of [`RefineApply`] this build implements.
@@ -105,6 +113,9 @@ pub enum ApplyKind {
     /// The gated kernel on a per-pixel blend of the warped depth and the classical refiner's
     /// output (the graph also takes that output as its `classical` input).
     Hybrid,
+    /// The hybrid refinement, the measurement and the classical estimate, each with an
+    /// expected error: each pixel publishes the one expected to be closest to the truth.
+    Guarded,
 }
 
 impl ApplyKind {
@@ -113,6 +124,7 @@ impl ApplyKind {
         match kind {
             "gated-kernel" => Some(ApplyKind::Gated),
             "hybrid-kernel" => Some(ApplyKind::Hybrid),
+            "guarded-kernel" => Some(ApplyKind::Guarded),
             _ => None,
         }
     }
@@ -122,7 +134,13 @@ impl ApplyKind {
         match self {
             ApplyKind::Gated => crate::model::kernel_apply::GATED_CHANNELS,
             ApplyKind::Hybrid => crate::model::kernel_apply::HYBRID_CHANNELS,
+            ApplyKind::Guarded => crate::model::kernel_apply::GUARDED_CHANNELS,
         }
+    }
+
+    /// Whether the refine graph of this kind takes the classical refiner's output.
+    pub fn takes_classical(self) -> bool {
+        matches!(self, ApplyKind::Hybrid | ApplyKind::Guarded)
     }
 }
 
@@ -376,11 +394,12 @@ impl Manifest {
             let hybrid = g
                 .apply
                 .as_ref()
-                .is_some_and(|a| a.apply_kind() == ApplyKind::Hybrid);
+                .is_some_and(|a| a.apply_kind().takes_classical());
             if has_classical != hybrid {
                 return Err(broken(format!(
                     "the refine graph {} a classical input but its apply kind is {:?} (only \
-                     \"hybrid-kernel\" takes the classical refiner's output)",
+                     \"hybrid-kernel\" and \"guarded-kernel\" take the classical refiner's \
+                     output)",
                     if has_classical {
                         "declares"
                     } else {
@@ -403,8 +422,8 @@ impl Manifest {
 fn check_apply(a: &RefineApply, multiple: usize) -> Result<(), String> {
     let Some(kind) = ApplyKind::parse(&a.kind) else {
         return Err(format!(
-            "apply.kind {:?} is unknown (this build applies \"gated-kernel\" and \
-             \"hybrid-kernel\")",
+            "apply.kind {:?} is unknown (this build applies \"gated-kernel\", \
+             \"hybrid-kernel\" and \"guarded-kernel\")",
             a.kind
         ));
     };
@@ -416,17 +435,38 @@ fn check_apply(a: &RefineApply, multiple: usize) -> Result<(), String> {
             kind.channels()
         ));
     }
-    match (kind, a.jump_scale) {
-        (ApplyKind::Hybrid, None) => {
-            return Err("apply.jump_scale is required for \"hybrid-kernel\"".into())
-        }
-        (ApplyKind::Hybrid, Some(v)) if !(v.is_finite() && v >= 0.0) => {
+    match (kind.takes_classical(), a.jump_scale) {
+        (true, None) => return Err(format!("apply.jump_scale is required for {:?}", a.kind)),
+        (true, Some(v)) if !(v.is_finite() && v >= 0.0) => {
             return Err(format!("apply.jump_scale {v} is not a non-negative number"))
         }
-        (ApplyKind::Gated, Some(_)) => {
-            return Err("apply.jump_scale belongs to \"hybrid-kernel\" only".into())
+        (false, Some(_)) => {
+            return Err(format!(
+                "apply.jump_scale belongs to \"hybrid-kernel\" and \"guarded-kernel\", not \
+                 {:?}",
+                a.kind
+            ))
         }
         _ => {}
+    }
+    let guarded = kind == ApplyKind::Guarded;
+    for (name, v) in [
+        ("error_unit", a.error_unit),
+        ("log_error_bound", a.log_error_bound),
+    ] {
+        match (guarded, v) {
+            (true, None) => return Err(format!("apply.{name} is required for \"guarded-kernel\"")),
+            (true, Some(v)) if !(v.is_finite() && v > 0.0) => {
+                return Err(format!("apply.{name} {v} is not a positive number"))
+            }
+            (false, Some(_)) => {
+                return Err(format!(
+                    "apply.{name} belongs to \"guarded-kernel\", not {:?}",
+                    a.kind
+                ))
+            }
+            _ => {}
+        }
     }
     if !matches!(a.stride, 2 | 4 | 8) || !multiple.is_multiple_of(a.stride) {
         return Err(format!(

@@ -17,7 +17,7 @@ use tract_onnx::prelude::*;
 use crate::frame::Flow;
 use crate::model::bundle::{LoadedGraph, ModelBundle};
 use crate::model::error::BundleError;
-use crate::model::kernel_apply::{apply_gated, blend_classical, GatedKernel};
+use crate::model::kernel_apply::{apply_gated, blend_classical, select_guarded, GatedKernel};
 use crate::model::manifest::{output_contract, GraphOutput, GraphRole};
 
 /// Largest padded side a runner accepts: beyond it a single plane is gigabytes.
@@ -53,6 +53,9 @@ pub struct BundleRunner {
     refine_tail: Option<(GatedKernel, Vec<Array2<f32>>)>,
     /// Hybrid refiners: the blend of depth and classical output the gated kernel runs on.
     blended: Option<Array2<f32>>,
+    /// Guarded refiners: `ln` of the published depth's expected error (metres) of the last
+    /// [`refine`](BundleRunner::refine).
+    log_error: Option<Array2<f32>>,
 }
 
 impl BundleRunner {
@@ -114,6 +117,10 @@ impl BundleRunner {
             .as_ref()
             .filter(|(k, _)| k.jump_scale.is_some())
             .map(|_| Array2::zeros((height, width)));
+        let log_error = refine_tail
+            .as_ref()
+            .filter(|(k, _)| k.errors.is_some())
+            .map(|_| Array2::from_elem((height, width), f32::INFINITY));
         Ok(BundleRunner {
             width,
             height,
@@ -124,6 +131,7 @@ impl BundleRunner {
             refine: build(GraphRole::Refine)?,
             refine_tail,
             blended,
+            log_error,
         })
     }
 
@@ -141,6 +149,13 @@ impl BundleRunner {
     /// refiner).
     pub fn refine_uses_classical(&self) -> bool {
         self.blended.is_some()
+    }
+
+    /// A guarded refiner's `ln` expected absolute error (metres) of each pixel the last
+    /// [`refine`](Self::refine) published (`+∞` where it published no depth); `None` for
+    /// refiners without expected-error maps.
+    pub fn expected_log_error(&self) -> Option<ArrayView2<'_, f32>> {
+        self.log_error.as_ref().map(|e| e.view())
     }
 
     /// Whether [`refine`](Self::refine) needs the RGB planes.
@@ -180,8 +195,10 @@ impl BundleRunner {
     }
 
     /// Refined depth (metres) from the warped normalised amplitude, the warped depth (metres),
-    /// for variants that use them the RGB planes, and for `hybrid` refiners the classical
-    /// refiner's output on the warped depth (metres).
+    /// for variants that use them the RGB planes, and for `hybrid` and `guarded` refiners the
+    /// classical refiner's output on the warped depth (metres). A guarded refiner publishes,
+    /// per pixel, the candidate with the smallest expected error and leaves that error in
+    /// [`expected_log_error`](Self::expected_log_error).
     ///
     /// # Errors
     /// As [`flow`](Self::flow); [`BundleError::Run`] also when the graph needs RGB or the
@@ -222,6 +239,9 @@ impl BundleRunner {
                     (Some(base), Some(c)) => {
                         blend_classical(maps, depth, c, base.view_mut(), kernel);
                         apply_gated(maps, base.view(), out.view_mut(), kernel);
+                        if let Some(log_error) = &mut self.log_error {
+                            select_guarded(maps, depth, c, out, log_error.view_mut(), kernel);
+                        }
                     }
                     _ => apply_gated(maps, depth, out, kernel),
                 }
