@@ -7,7 +7,13 @@
 //!   25–50 %, high 50–75 %, the rest "outliers"; `All` covers every evaluated pixel. Pixels are
 //!   ranked within each frame and the sums accumulated over frames, never re-ranked over a set.
 //!
-//! `train/dear_train/evaluation.py` implements the same definitions for the training side
+//! - [`Reliability`]: how well a predicted per-pixel absolute error (a guarded refiner's
+//!   expected-error confidence) matches the error measured against the ground truth, per bin
+//!   of the prediction (issue 33's reliability table);
+//! - [`TemporalChange`]: mean frame-to-frame change of the depth on static surfaces (pixels
+//!   whose ground truth did not change), the flicker a sequence shows.
+//!
+//! `train/dear_train/evaluation.py` implements the first two definitions for the training side
 //! (`dear-evaluate`, a run's validation, `model.json`'s `validation`); both are checked against
 //! the hand-computed cases in `fixtures/metrics/` (`pipeline/tests/metrics_fixture.rs`,
 //! `train/tests/test_metrics_fixture.py`). Change the two together.
@@ -127,6 +133,122 @@ impl DepthErrorSplit {
     }
 }
 
+/// Upper edges (cm) of the bins of predicted error [`Reliability`] reports; the last bin is
+/// open above.
+pub const RELIABILITY_EDGES_CM: [f64; 8] = [0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0];
+const RELIABILITY_BINS: usize = RELIABILITY_EDGES_CM.len() + 1;
+
+/// Predicted against measured absolute depth error, accumulated over frames per bin of the
+/// prediction. Evaluated pixels: ground truth in `(0, max_depth]`, a valid output and a finite
+/// prediction.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Reliability {
+    pub counts: [u64; RELIABILITY_BINS],
+    /// Sums of the predicted errors, metres.
+    pub predicted: [f64; RELIABILITY_BINS],
+    /// Sums of `|output − gt|`, metres.
+    pub measured: [f64; RELIABILITY_BINS],
+}
+
+/// One bin of a [`Reliability`]: predictions in `[lo_cm, hi_cm)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReliabilityBin {
+    pub lo_cm: f64,
+    /// `None`: open above.
+    pub hi_cm: Option<f64>,
+    pub pixels: u64,
+    pub mean_predicted_cm: f64,
+    pub mean_measured_cm: f64,
+}
+
+impl Reliability {
+    /// Adds one frame: `predicted` holds each pixel's predicted absolute error in metres.
+    pub fn add_frame(
+        &mut self,
+        output: ArrayView2<f32>,
+        predicted: ArrayView2<f32>,
+        gt: ArrayView2<f32>,
+        max_depth: f32,
+    ) {
+        Zip::from(output)
+            .and(predicted)
+            .and(gt)
+            .for_each(|&o, &p, &g| {
+                if is_valid_depth(g) && g <= max_depth && is_valid_depth(o) && p.is_finite() {
+                    let cm = 100.0 * p as f64;
+                    let bin = RELIABILITY_EDGES_CM.partition_point(|&edge| edge <= cm);
+                    self.counts[bin] += 1;
+                    self.predicted[bin] += p as f64;
+                    self.measured[bin] += (o - g).abs() as f64;
+                }
+            });
+    }
+
+    /// The bins that hold pixels, from the smallest prediction up.
+    pub fn bins(&self) -> Vec<ReliabilityBin> {
+        (0..RELIABILITY_BINS)
+            .filter(|&b| self.counts[b] > 0)
+            .map(|b| {
+                let n = self.counts[b] as f64;
+                ReliabilityBin {
+                    lo_cm: if b == 0 {
+                        0.0
+                    } else {
+                        RELIABILITY_EDGES_CM[b - 1]
+                    },
+                    hi_cm: RELIABILITY_EDGES_CM.get(b).copied(),
+                    pixels: self.counts[b],
+                    mean_predicted_cm: 100.0 * self.predicted[b] / n,
+                    mean_measured_cm: 100.0 * self.measured[b] / n,
+                }
+            })
+            .collect()
+    }
+}
+
+/// Ground truths closer than this (metres) count as the same static surface.
+pub const STATIC_TOLERANCE_M: f32 = 1e-3;
+
+/// Mean absolute change of the depth between consecutive frames over *static* pixels: ground
+/// truth valid, within range and unchanged (to [`STATIC_TOLERANCE_M`]) in both frames, and the
+/// depth valid in both. On a still scene this is pure flicker: noise, and corrections that
+/// come and go.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TemporalChange {
+    pub sum: f64,
+    pub count: u64,
+}
+
+impl TemporalChange {
+    /// Adds the pair (`previous`, `current`) of consecutive frames.
+    pub fn add_pair(
+        &mut self,
+        (previous, previous_gt): (ArrayView2<f32>, ArrayView2<f32>),
+        (current, current_gt): (ArrayView2<f32>, ArrayView2<f32>),
+        max_depth: f32,
+    ) {
+        Zip::from(previous)
+            .and(previous_gt)
+            .and(current)
+            .and(current_gt)
+            .for_each(|&a, &ga, &b, &gb| {
+                let still = is_valid_depth(ga)
+                    && is_valid_depth(gb)
+                    && ga <= max_depth
+                    && (ga - gb).abs() <= STATIC_TOLERANCE_M;
+                if still && is_valid_depth(a) && is_valid_depth(b) {
+                    self.sum += (a - b).abs() as f64;
+                    self.count += 1;
+                }
+            });
+    }
+
+    /// The mean change in centimetres; `None` before any static pixel.
+    pub fn mean_cm(&self) -> Option<f64> {
+        (self.count > 0).then(|| 100.0 * self.sum / self.count as f64)
+    }
+}
+
 /// Quantile class of the pixel at `rank` (0-based) among `n`: 0 for the first 25 %, …, 3 for
 /// the last 25 %.
 fn class_of(rank: usize, n: usize) -> usize {
@@ -179,6 +301,51 @@ mod tests {
         let all = (0.001 + 0.002 + 0.003 + 0.02 + 0.05 + 0.0 + 0.10) / 7.0 * 100.0;
         assert!((split.mae_all_cm().unwrap() - all).abs() < 1e-4);
         assert!((split.coverage() - 7.0 / 8.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn reliability_bins_by_hand() {
+        let gt = arr2(&[[1.0, 1.0, 1.0, 1.0, 5.0, 1.0]]);
+        let out = arr2(&[[1.002, 1.004, 1.1, 0.0, 5.0, 1.3]]);
+        // Predictions 0.3 cm, 0.4 cm (bin < 0.5), 5 cm (4–8), an invalid output, beyond 4 m,
+        // and a NaN prediction: three pixels in two bins.
+        let pred = arr2(&[[0.003, 0.004, 0.05, 0.01, 0.01, f32::NAN]]);
+        let mut r = Reliability::default();
+        r.add_frame(out.view(), pred.view(), gt.view(), MAX_EVAL_DEPTH_M);
+        let bins = r.bins();
+        assert_eq!(bins.len(), 2);
+        assert_eq!(
+            (bins[0].lo_cm, bins[0].hi_cm, bins[0].pixels),
+            (0.0, Some(0.5), 2)
+        );
+        assert!((bins[0].mean_predicted_cm - 0.35).abs() < 1e-4);
+        assert!((bins[0].mean_measured_cm - 0.3).abs() < 1e-4);
+        assert_eq!(
+            (bins[1].lo_cm, bins[1].hi_cm, bins[1].pixels),
+            (4.0, Some(8.0), 1)
+        );
+        assert!((bins[1].mean_measured_cm - 10.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn temporal_change_counts_static_pixels_only() {
+        let gt0 = arr2(&[[1.0, 2.0, 3.0, 1.0]]);
+        let gt1 = arr2(&[[1.0, 2.5, 3.0, 1.0]]); // the second pixel moved: not static
+        let d0 = arr2(&[[1.01, 2.0, 3.0, 0.0]]);
+        let d1 = arr2(&[[0.99, 2.5, 3.03, 1.0]]); // the last was invalid before
+        let mut t = TemporalChange::default();
+        t.add_pair(
+            (d0.view(), gt0.view()),
+            (d1.view(), gt1.view()),
+            MAX_EVAL_DEPTH_M,
+        );
+        assert_eq!(t.count, 2);
+        assert!(
+            (t.mean_cm().unwrap() - 2.5).abs() < 1e-4,
+            "{:?}",
+            t.mean_cm()
+        );
+        assert_eq!(TemporalChange::default().mean_cm(), None);
     }
 
     #[test]

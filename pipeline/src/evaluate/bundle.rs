@@ -76,6 +76,13 @@ impl BundleMethod {
         )
     }
 
+    /// The frame's published confidence when it holds expected-error codes.
+    fn expected_error_code(&self, report: &ChainReport) -> Option<Array2<u8>> {
+        report
+            .confidence_is_expected_error
+            .then(|| self.confidence.clone())
+    }
+
     /// The paper's chain (rough flow and calibration solved on this frame).
     ///
     /// # Errors
@@ -91,6 +98,7 @@ impl BundleMethod {
             flow_rough: flow_rough.clone(),
             calibration: report.calibration,
             seconds: (t.preprocess + t.flow + t.calibrate + t.fuse + t.warp).as_secs_f64(),
+            expected_error_code: None,
         };
         let refined = MethodOutput {
             depth: self.depth.clone(),
@@ -98,6 +106,7 @@ impl BundleMethod {
             flow_rough,
             calibration: report.calibration,
             seconds: t.total().as_secs_f64(),
+            expected_error_code: self.expected_error_code(&report),
         };
         Ok(BundleOutputs {
             aligned,
@@ -123,6 +132,7 @@ impl BundleMethod {
                         flow_rough: None,
                         calibration: Some(truth),
                         seconds: t.total().as_secs_f64(),
+                        expected_error_code: self.expected_error_code(&report),
                     }
                 }),
         )
@@ -150,6 +160,7 @@ impl BundleMethod {
             flow_rough: None,
             calibration: online.estimate().or(report.calibration),
             seconds: report.timings.total().as_secs_f64(),
+            expected_error_code: self.expected_error_code(&report),
         };
         Ok((output, report))
     }

@@ -76,6 +76,9 @@ pub struct MethodOutput {
     pub calibration: Option<Calibration>,
     /// Wall time of the method on this frame, seconds.
     pub seconds: f64,
+    /// The published confidence, when it holds expected-error codes
+    /// (`dear_proto::confidence`; a guarded refiner's rows).
+    pub expected_error_code: Option<Array2<u8>>,
 }
 
 /// Runs methods over frames, keeping scratch buffers between frames.
@@ -112,6 +115,7 @@ impl MethodRunner {
                     flow_rough: None,
                     calibration: None,
                     seconds: start.elapsed().as_secs_f64(),
+                    expected_error_code: None,
                 })
             }
             Method::StaticCalibration => (self.initial, false),
@@ -152,6 +156,7 @@ impl MethodRunner {
             flow_rough: None,
             calibration: Some(calibration),
             seconds: start.elapsed().as_secs_f64(),
+            expected_error_code: None,
         })
     }
 }

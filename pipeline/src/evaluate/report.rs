@@ -4,9 +4,11 @@ use serde::Serialize;
 
 use super::methods::MethodOutput;
 use crate::capture::Sample;
-use crate::metrics::{aepe, DepthErrorSplit, CLASSES, MAX_EVAL_DEPTH_M};
+use crate::metrics::{
+    aepe, DepthErrorSplit, Reliability, TemporalChange, CLASSES, MAX_EVAL_DEPTH_M,
+};
 use crate::Flow;
-use ndarray::ArrayView2;
+use ndarray::{Array2, ArrayView2};
 
 /// Accumulated results of one method.
 #[derive(Debug, Clone, Default)]
@@ -17,6 +19,22 @@ pub struct MethodAccumulator {
     aepe_rough_sum: f64,
     aepe_rough_frames: usize,
     seconds: Vec<f64>,
+    /// Methods that publish expected-error codes: predicted against measured error.
+    reliability: Option<Reliability>,
+    temporal: TemporalChange,
+    /// The last frame added: its index, the method's depth and the masked ground truth.
+    previous: Option<(u64, Array2<f32>, Array2<f32>)>,
+}
+
+/// One bin of the reliability table (see [`Reliability`]): predictions in `[lo_cm, hi_cm)`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReliabilityRow {
+    pub predicted_lo_cm: f64,
+    /// `None`: open above.
+    pub predicted_hi_cm: Option<f64>,
+    pub pixels: u64,
+    pub mean_predicted_cm: f64,
+    pub mean_measured_cm: f64,
 }
 
 /// The summary of one method, as printed and written.
@@ -37,6 +55,13 @@ pub struct MethodReport {
     /// Median seconds per frame ([`dear_stats::median`]: nearest rank, the lower middle frame
     /// for an even count).
     pub median_seconds: f64,
+    /// Mean frame-to-frame change (cm) on static surfaces over consecutive evaluated frames
+    /// ([`TemporalChange`]); `None` without two consecutive frames.
+    pub temporal_change_cm: Option<f64>,
+    /// Predicted against measured error per bin, for methods whose confidence is an
+    /// expected-error code; empty otherwise.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub reliability: Vec<ReliabilityRow>,
 }
 
 /// An evaluation in progress: one accumulator per method name, in insertion order.
@@ -95,6 +120,28 @@ impl Evaluation {
                 acc.aepe_rough_frames += 1;
             }
         }
+        if let Some(codes) = &output.expected_error_code {
+            let predicted =
+                codes.mapv(|v| dear_proto::confidence::expected_error_m(v).unwrap_or(f32::NAN));
+            acc.reliability
+                .get_or_insert_with(Reliability::default)
+                .add_frame(
+                    output.depth.view(),
+                    predicted.view(),
+                    gt_masked.view(),
+                    MAX_EVAL_DEPTH_M,
+                );
+        }
+        if let Some((index, depth, gt)) = &acc.previous {
+            if index + 1 == frame.index {
+                acc.temporal.add_pair(
+                    (depth.view(), gt.view()),
+                    (output.depth.view(), gt_masked.view()),
+                    MAX_EVAL_DEPTH_M,
+                );
+            }
+        }
+        acc.previous = Some((frame.index, output.depth.clone(), gt_masked));
         acc.seconds.push(output.seconds);
     }
 
@@ -115,6 +162,19 @@ impl Evaluation {
                     aepe_rough_px: (acc.aepe_rough_frames > 0)
                         .then(|| acc.aepe_rough_sum / acc.aepe_rough_frames as f64),
                     median_seconds: dear_stats::median(&seconds).unwrap_or(f64::NAN),
+                    temporal_change_cm: acc.temporal.mean_cm(),
+                    reliability: acc.reliability.map_or_else(Vec::new, |r| {
+                        r.bins()
+                            .into_iter()
+                            .map(|b| ReliabilityRow {
+                                predicted_lo_cm: b.lo_cm,
+                                predicted_hi_cm: b.hi_cm,
+                                pixels: b.pixels,
+                                mean_predicted_cm: b.mean_predicted_cm,
+                                mean_measured_cm: b.mean_measured_cm,
+                            })
+                            .collect()
+                    }),
                 }
             })
             .collect()
@@ -127,12 +187,13 @@ impl Evaluation {
             out.push_str(&format!(" MAE {c} (cm) |"));
         }
         out.push_str(
-            " MAE all (cm) | Coverage | ms / frame |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+            " MAE all (cm) | Coverage | Flicker (cm) | ms / frame |\n\
+             |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         );
         let fmt = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.2}"));
         for r in self.reports() {
             out.push_str(&format!(
-                "| {} | {} | {} | {} | {} | {} | {} | {:.1} % | {:.1} |\n",
+                "| {} | {} | {} | {} | {} | {} | {} | {:.1} % | {} | {:.1} |\n",
                 r.method,
                 fmt(r.aepe_rough_px),
                 fmt(r.aepe_px),
@@ -141,8 +202,27 @@ impl Evaluation {
                 fmt(r.mae_cm[2]),
                 fmt(r.mae_all_cm),
                 100.0 * r.coverage,
+                fmt(r.temporal_change_cm),
                 1e3 * r.median_seconds
             ));
+        }
+        for r in self.reports().iter().filter(|r| !r.reliability.is_empty()) {
+            out.push_str(&format!(
+                "\nReliability of {}'s expected-error confidence (pixels within 4 m):\n\n\
+                 | predicted (cm) | pixels | mean predicted (cm) | mean measured (cm) |\n\
+                 |---|---:|---:|---:|\n",
+                r.method
+            ));
+            for b in &r.reliability {
+                let range = match b.predicted_hi_cm {
+                    Some(hi) => format!("{}–{}", b.predicted_lo_cm, hi),
+                    None => format!("≥ {}", b.predicted_lo_cm),
+                };
+                out.push_str(&format!(
+                    "| {range} | {} | {:.2} | {:.2} |\n",
+                    b.pixels, b.mean_predicted_cm, b.mean_measured_cm
+                ));
+            }
         }
         out
     }
