@@ -91,6 +91,10 @@
 // depth was published instead.
 #define DEAR_FLAG_NETWORK_OUTPUT_REJECTED (1 << 5)
 
+// `dear_header.flags`: the confidence plane holds expected-error codes (see
+// `dear_confidence_expected_error_m`).
+#define DEAR_FLAG_CONFIDENCE_EXPECTED_ERROR (1 << 6)
+
 // What a function of this library did. `DEAR_OK` and `DEAR_TIMEOUT` are not failures; every
 // negative value is one, and `dear_last_error()` then says what failed and why.
 typedef enum dear_status {
@@ -271,14 +275,21 @@ const float *dear_frame_depth(const struct dear_frame *frame, size_t *len);
 // As `dear_frame_depth`.
 const uint8_t *dear_frame_rgb(const struct dear_frame *frame, size_t *len);
 
-// Per-pixel confidence, `height·width` bytes: 0 = invalid (exactly where depth is 0), 255 =
-// measured and kept, in between = filled or smoothed. `*len` receives the number of bytes.
+// Per-pixel confidence, `height·width` bytes: 0 = invalid (exactly where depth is 0). With
+// `DEAR_FLAG_CONFIDENCE_EXPECTED_ERROR` set, an expected-error code
+// (`dear_confidence_expected_error_m`); otherwise 255 = measured and kept, in between =
+// filled or smoothed. `*len` receives the number of bytes.
 // Valid until the frame is released; read-only.
 //
 // # Safety
 //
 // As `dear_frame_depth`.
 const uint8_t *dear_frame_confidence(const struct dear_frame *frame, size_t *len);
+
+// The expected absolute depth error in metres that confidence `code` stands for in a frame
+// with `DEAR_FLAG_CONFIDENCE_EXPECTED_ERROR`: `0.001 · 2^((255 − code) / 16)` (255: 1 mm,
+// 202: 1 cm, 149: 10 cm); NaN for 0 (no depth).
+float dear_confidence_expected_error_m(uint8_t code);
 
 // The message of the last failure on this thread: what failed and why, with the service
 // name and, when it is the cause, the iceoryx2 root (the full error chain, `outer: cause:

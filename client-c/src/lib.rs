@@ -82,6 +82,9 @@ pub const DEAR_FLAG_CALIBRATION_ONLINE: u32 = 1 << 4;
 /// `dear_header.flags`: the network's output was implausible; the classical filter's
 /// depth was published instead.
 pub const DEAR_FLAG_NETWORK_OUTPUT_REJECTED: u32 = 1 << 5;
+/// `dear_header.flags`: the confidence plane holds expected-error codes (see
+/// `dear_confidence_expected_error_m`).
+pub const DEAR_FLAG_CONFIDENCE_EXPECTED_ERROR: u32 = 1 << 6;
 
 const _: () = {
     assert!(DEAR_MAX_HELD_FRAMES == dear_proto::service::QOS_SUBSCRIBER_BORROWED);
@@ -95,6 +98,7 @@ const _: () = {
     assert!(DEAR_FLAG_CALIBRATION_ESTIMATED == dear_proto::flags::CALIBRATION_ESTIMATED);
     assert!(DEAR_FLAG_CALIBRATION_ONLINE == dear_proto::flags::CALIBRATION_ONLINE);
     assert!(DEAR_FLAG_NETWORK_OUTPUT_REJECTED == dear_proto::flags::NETWORK_OUTPUT_REJECTED);
+    assert!(DEAR_FLAG_CONFIDENCE_EXPECTED_ERROR == dear_proto::flags::CONFIDENCE_EXPECTED_ERROR);
 };
 
 /// The header of a frame: the protocol's `DearFrameHeader` (192 bytes, README "Frame layout"),
@@ -601,8 +605,10 @@ pub unsafe extern "C" fn dear_frame_rgb(frame: *const dear_frame, len: *mut usiz
     unsafe { plane("dear_frame_rgb", frame, len, Frame::rgb) }
 }
 
-/// Per-pixel confidence, `height·width` bytes: 0 = invalid (exactly where depth is 0), 255 =
-/// measured and kept, in between = filled or smoothed. `*len` receives the number of bytes.
+/// Per-pixel confidence, `height·width` bytes: 0 = invalid (exactly where depth is 0). With
+/// `DEAR_FLAG_CONFIDENCE_EXPECTED_ERROR` set, an expected-error code
+/// (`dear_confidence_expected_error_m`); otherwise 255 = measured and kept, in between =
+/// filled or smoothed. `*len` receives the number of bytes.
 /// Valid until the frame is released; read-only.
 ///
 /// # Safety
@@ -615,6 +621,14 @@ pub unsafe extern "C" fn dear_frame_confidence(
 ) -> *const u8 {
     // SAFETY: the caller's promises are `plane`'s.
     unsafe { plane("dear_frame_confidence", frame, len, Frame::confidence) }
+}
+
+/// The expected absolute depth error in metres that confidence `code` stands for in a frame
+/// with `DEAR_FLAG_CONFIDENCE_EXPECTED_ERROR`: `0.001 · 2^((255 − code) / 16)` (255: 1 mm,
+/// 202: 1 cm, 149: 10 cm); NaN for 0 (no depth).
+#[no_mangle]
+pub extern "C" fn dear_confidence_expected_error_m(code: u8) -> f32 {
+    dear_proto::confidence::expected_error_m(code).unwrap_or(f32::NAN)
 }
 
 /// The message of the last failure on this thread: what failed and why, with the service

@@ -545,8 +545,21 @@ fn _dear(m: &Bound<'_, PyModule>) -> PyResult<()> {
             "FLAG_NETWORK_OUTPUT_REJECTED",
             flags::NETWORK_OUTPUT_REJECTED,
         ),
+        (
+            "FLAG_CONFIDENCE_EXPECTED_ERROR",
+            flags::CONFIDENCE_EXPECTED_ERROR,
+        ),
     ] {
         m.add(name, bit)?;
     }
+    // The expected-error code's constants; `dear.expected_error_m` decodes with them.
+    m.add(
+        "ERROR_CODE_UNIT_M",
+        dear_client::confidence::ERROR_CODE_UNIT_M,
+    )?;
+    m.add(
+        "ERROR_CODE_STEPS_PER_DOUBLING",
+        dear_client::confidence::ERROR_CODE_STEPS_PER_DOUBLING,
+    )?;
     Ok(())
 }

@@ -19,6 +19,6 @@ pub mod frame;
 pub mod save;
 pub mod subscriber;
 
-pub use dear_proto::{default_service_name, flags, FrameHeader, HeaderError, Stage};
+pub use dear_proto::{confidence, default_service_name, flags, FrameHeader, HeaderError, Stage};
 pub use frame::{Frame, FrameError};
 pub use subscriber::{Client, ClientError, ConnectError, ReceiveError};

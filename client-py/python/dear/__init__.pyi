@@ -18,6 +18,11 @@ FLAG_REFINED_CLASSICAL: Final[int]
 FLAG_CALIBRATION_ESTIMATED: Final[int]
 FLAG_CALIBRATION_ONLINE: Final[int]
 FLAG_NETWORK_OUTPUT_REJECTED: Final[int]
+FLAG_CONFIDENCE_EXPECTED_ERROR: Final[int]
+ERROR_CODE_UNIT_M: Final[float]
+ERROR_CODE_STEPS_PER_DOUBLING: Final[float]
+
+def expected_error_m(confidence: npt.ArrayLike) -> npt.NDArray[np.float32]: ...
 
 class DearError(Exception):
     """Base class of the errors of the dear package."""
