@@ -4,6 +4,7 @@
 #      misaligned copies at the paper's σ = 2, 4, 6 px of a 640×480 image, i.e. σ = 1, 2, 3 px
 #      at 320×240, seed 4) under $DEAR_DATA (default data/, ignored); the held-out family
 #      (80 frames, seed 9002) aligned and at σ = 4 px;
+#      the clean, empty, wide and dual-low families (80 frames each, seeds 9003-9006, aligned);
 #      a 300-frame sequence with a drifting calibration (seed 77, 4 px peak drift), and a
 #      60-frame 640×480 sequence (seed 5) for the daemon's latency;
 #   2. runs `dear eval` on each set: ToF input, the classical baselines and every bundle under
@@ -87,11 +88,26 @@ for set in aligned sigma2 sigma4 sigma6 heldout heldout-sigma4; do
     target/release/dear eval --capture "$data/$set" --baselines "${bundles[@]}" "${extra[@]}" \
         --figures "$figures" --out "$out/$set" > /dev/null
 done
+# Refinement on families the user's module may be in (issue 33, synth/src/family.rs): clean
+# (bright, single bounce), near-empty rooms, a wide-angle module and a dual-frequency one.
+for spec in clean:9003 empty:9004 wide:9005 dual-low:9006; do
+    set=${spec%%:*}
+    if [ ! -f "$data/$set/capture.json" ]; then
+        rm -rf "$data/$set-family"
+        target/release/dear-synth family --family "$set" --shards 1 --frames-per-shard "$frames" \
+            --seed "${spec##*:}" --width 320 --height 240 --out "$data/$set-family"
+        mv "$data/$set-family/shard-000" "$data/$set"
+        rm -rf "$data/$set-family"
+    fi
+    echo "== dear eval on $set"
+    target/release/dear eval --capture "$data/$set" --baselines "${bundles[@]}" --figures 0 \
+        --out "$out/$set" > /dev/null
+done
 # The outside aligner (issue 32, scripts/outside_aligner.py): OpenCV only, in its own venv (made
 # here; skipped when it cannot be); its scoring is checked against fixtures/ and its static
 # row against dear eval's on every set before its figure is written.
 cvenv=out/opencv-venv
-rm -f "$out"/*/outside_aligner.json
+rm -f "$out"/*/outside_aligner.json "$out"/*/opencv.json
 if [ ! -x "$cvenv/bin/python" ]; then
     { python3 -m venv "$cvenv" && "$cvenv/bin/pip" install --quiet opencv-contrib-python-headless \
         numpy pillow; } || rm -rf "$cvenv"
@@ -102,6 +118,12 @@ if [ -x "$cvenv/bin/python" ]; then
         echo "== outside aligner on $set"
         "$cvenv/bin/python" scripts/outside_aligner.py "$data/$set" \
             --check-static "$out/$set/eval.json" --json "$out/$set/outside_aligner.json" > /dev/null
+    done
+    # OpenCV's filters on every refinement set, each tuned on the set it is scored on.
+    for set in aligned heldout clean empty wide dual-low; do
+        echo "== OpenCV filters on $set"
+        "$cvenv/bin/python" scripts/opencv_baselines.py "$data/$set" \
+            --json "$out/$set/opencv.json" > /dev/null
     done
 fi
 echo "== dear eval --online on the drifting sequence"
