@@ -226,8 +226,8 @@ def table_tracking(
 #: Refinement sets of the family table (issue 33): name, what it is.
 FAMILIES = [
     ("aligned", "default simulator settings (seed 9001)"),
-    ("heldout", "held-out family: outside every training range"),
-    ("clean", "clean: bright, single bounce, no multi-path"),
+    ("heldout", "outside every training range"),
+    ("clean", "bright, single bounce, no multi-path"),
     ("empty", "near-empty rooms (0–2 objects)"),
     ("wide", "wide-angle module, 30–45 mm illuminator offset (never trained on)"),
     ("dual-low", "dual-frequency 20 + 16 MHz module (never trained on)"),
