@@ -32,6 +32,8 @@ if [ -d train ]; then
     echo "== ruff";   .venv/bin/ruff check train scripts fixtures tests/scripts client-py
     .venv/bin/ruff format --check train scripts fixtures tests/scripts client-py
     echo "== pytest"; (cd train && ../.venv/bin/python -m pytest -q tests)
+    # The outside aligner's scoring against the shared fixtures (numpy only, no OpenCV).
+    echo "== outside aligner scoring"; .venv/bin/python scripts/outside_aligner.py --check
     # The Python client package against a real target/debug/deard (built by cargo test above).
     echo "== pytest (client-py)"; (cd client-py && ../.venv/bin/python -m pytest -q tests)
 fi
