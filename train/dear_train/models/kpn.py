@@ -224,8 +224,9 @@ class HybridKernelApply(nn.Module):
 #: Channels of the ``guarded`` head: the 13 hybrid maps, then the log expected absolute error of
 #: the hybrid refinement, of the measurement and of the classical estimate.
 GUARDED_CHANNELS = 16
-#: Unit of the error maps: expected |error| = ``GUARDED_ERROR_UNIT · exp(clamp(m, ±GUARDED_LOG_ERROR_BOUND))``
-#: in normalised depth (× max_depth 10 m: 1 cm per unit).
+#: Unit of the error maps: a map value ``m`` stands for the expected |error|
+#: ``GUARDED_ERROR_UNIT · exp(clamp(m, ±GUARDED_LOG_ERROR_BOUND))`` in normalised depth
+#: (× max_depth 10 m: 1 cm per unit).
 GUARDED_ERROR_UNIT = 1e-3
 #: Bound on the error maps' logits: expected errors from 0.025 mm to 4 m at max_depth 10 m.
 GUARDED_LOG_ERROR_BOUND = 6.0
@@ -449,7 +450,6 @@ class RefineNet(nn.Module):
                 return depth + out
             return out
         return self.apply_kernel(depth, out[:, :9], out[:, 9:10])
-
 
     def forward_guarded(
         self,
