@@ -14,21 +14,10 @@ use ndarray::{Array2, Array3};
 #[test]
 fn gated_tail_matches_pytorch() {
     let doc = fixture("gated.json");
-    let (ds, dd) = common::f32_array(&doc["depth"]);
-    let depth = Array2::from_shape_vec((ds[0], ds[1]), dd).unwrap();
-    let (ms, md) = common::f32_array(&doc["maps"]);
-    assert_eq!(ms[0], GATED_CHANNELS);
-    let maps3 = Array3::from_shape_vec((ms[0], ms[1], ms[2]), md).unwrap();
-    let maps: Vec<Array2<f32>> = maps3.outer_iter().map(|m| m.to_owned()).collect();
+    let depth = plane(&doc["depth"]);
+    let maps = maps(&doc, GATED_CHANNELS);
     let (_, want) = common::f32_array(&doc["out"]);
-    let kernel = GatedKernel {
-        stride: doc["stride"].as_u64().unwrap() as usize,
-        max_bias: 0.05,
-        range_scale: 100.0,
-        max_depth_m: doc["max_depth_m"].as_f64().unwrap() as f32,
-        jump_scale: None,
-        errors: None,
-    };
+    let kernel = kernel(&doc, None, None);
     let mut out = Array2::zeros(depth.dim());
     apply_gated(&maps, depth.view(), out.view_mut(), &kernel);
     let mut worst = 0.0f32;
@@ -58,24 +47,39 @@ fn plane(v: &serde_json::Value) -> Array2<f32> {
     Array2::from_shape_vec((s[0], s[1]), d).unwrap()
 }
 
+/// The fixture's `channels` maps, one plane each.
+fn maps(doc: &serde_json::Value, channels: usize) -> Vec<Array2<f32>> {
+    let (ms, md) = common::f32_array(&doc["maps"]);
+    assert_eq!(ms[0], channels);
+    let maps3 = Array3::from_shape_vec((ms[0], ms[1], ms[2]), md).unwrap();
+    maps3.outer_iter().map(|m| m.to_owned()).collect()
+}
+
+/// The kernel of a fixture: its stride and depth scale, the exporter's constants (checked
+/// against the Python side by `train/tests/test_kernel_apply_fixture.py`).
+fn kernel(
+    doc: &serde_json::Value,
+    jump_scale: Option<f32>,
+    errors: Option<ErrorMaps>,
+) -> GatedKernel {
+    GatedKernel {
+        stride: doc["stride"].as_u64().unwrap() as usize,
+        max_bias: 0.05,
+        range_scale: 100.0,
+        max_depth_m: doc["max_depth_m"].as_f64().unwrap() as f32,
+        jump_scale,
+        errors,
+    }
+}
+
 #[test]
 fn hybrid_tail_matches_pytorch() {
     let doc = fixture("hybrid.json");
     let depth = plane(&doc["depth"]);
     let classical = plane(&doc["classical"]);
-    let (ms, md) = common::f32_array(&doc["maps"]);
-    assert_eq!(ms[0], HYBRID_CHANNELS);
-    let maps3 = Array3::from_shape_vec((ms[0], ms[1], ms[2]), md).unwrap();
-    let maps: Vec<Array2<f32>> = maps3.outer_iter().map(|m| m.to_owned()).collect();
+    let maps = maps(&doc, HYBRID_CHANNELS);
     let want = plane(&doc["out"]);
-    let kernel = GatedKernel {
-        stride: doc["stride"].as_u64().unwrap() as usize,
-        max_bias: 0.05,
-        range_scale: 100.0,
-        max_depth_m: doc["max_depth_m"].as_f64().unwrap() as f32,
-        jump_scale: Some(300.0),
-        errors: None,
-    };
+    let kernel = kernel(&doc, Some(300.0), None);
     let mut base = Array2::zeros(depth.dim());
     let mut out = Array2::zeros(depth.dim());
     blend_classical(
@@ -116,23 +120,14 @@ fn guarded_tail_matches_pytorch() {
     let doc = fixture("guarded.json");
     let depth = plane(&doc["depth"]);
     let classical = plane(&doc["classical"]);
-    let (ms, md) = common::f32_array(&doc["maps"]);
-    assert_eq!(ms[0], GUARDED_CHANNELS);
-    let maps3 = Array3::from_shape_vec((ms[0], ms[1], ms[2]), md).unwrap();
-    let maps: Vec<Array2<f32>> = maps3.outer_iter().map(|m| m.to_owned()).collect();
+    let maps = maps(&doc, GUARDED_CHANNELS);
     let want = plane(&doc["out"]);
     let want_log_error = plane(&doc["log_error"]);
-    let kernel = GatedKernel {
-        stride: doc["stride"].as_u64().unwrap() as usize,
-        max_bias: 0.05,
-        range_scale: 100.0,
-        max_depth_m: doc["max_depth_m"].as_f64().unwrap() as f32,
-        jump_scale: Some(300.0),
-        errors: Some(ErrorMaps {
-            unit: common::f32_array(&doc["error_unit"]).1[0],
-            log_bound: 6.0,
-        }),
+    let errors = ErrorMaps {
+        unit: common::f32_array(&doc["error_unit"]).1[0],
+        log_bound: 6.0,
     };
+    let kernel = kernel(&doc, Some(300.0), Some(errors));
     let mut base = Array2::zeros(depth.dim());
     let mut out = Array2::zeros(depth.dim());
     let mut log_error = Array2::zeros(depth.dim());
