@@ -102,3 +102,50 @@ fn overlapped_frames_are_published_and_a_bad_next_frame_is_refused_by_name() {
     assert!(finished.next.is_none());
     assert_eq!(header.frame_id, 2);
 }
+
+/// A guarded bundle's frames say their confidence is an expected-error code (flag bit 6), with
+/// code 0 exactly where no depth is published; the shipped hybrid bundle's frames do not.
+#[test]
+fn a_guarded_bundle_publishes_expected_error_codes_and_says_so() {
+    let capture = CaptureDir::open(root().join("samples/demo")).unwrap();
+    let (w, h) = capture.size();
+    let frame = capture.read_frame(0).unwrap();
+    for (bundle, guarded) in [("models/edge-guarded", true), ("models/edge", false)] {
+        let config = PipelineConfig {
+            refine: RefineMode::Dear,
+            bundle: root().join(bundle),
+            ..PipelineConfig::default()
+        };
+        let mut processor =
+            Processor::from_config(w, h, capture.manifest().initial_calibration, &config).unwrap();
+        let mut planes = Planes::new(h as usize, w as usize);
+        let mut header = FrameHeader::new(frame.index, w, h);
+        let pending = processor.prepare(&frame).unwrap();
+        let finished = processor.finish_into(pending, None, &mut header, planes.output());
+        finished.result.unwrap();
+        assert_eq!(
+            header.flags & flags::CONFIDENCE_EXPECTED_ERROR != 0,
+            guarded,
+            "{bundle}: flags {:x}",
+            header.flags
+        );
+        assert!(header.flags & flags::REFINED_NETWORK != 0, "{bundle}");
+        for (z, c) in planes.depth.iter().zip(&planes.confidence) {
+            assert_eq!(
+                *z > 0.0,
+                *c > 0,
+                "{bundle}: confidence 0 exactly where depth is 0"
+            );
+        }
+        if guarded {
+            // Codes spread over errors from millimetres to decimetres, not one value.
+            let codes: std::collections::BTreeSet<u8> = planes
+                .confidence
+                .iter()
+                .copied()
+                .filter(|&c| c > 0)
+                .collect();
+            assert!(codes.len() > 20, "{} distinct codes", codes.len());
+        }
+    }
+}
