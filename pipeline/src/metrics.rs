@@ -150,12 +150,13 @@ pub struct Reliability {
     pub measured: [f64; RELIABILITY_BINS],
 }
 
-/// One bin of a [`Reliability`]: predictions in `[lo_cm, hi_cm)`.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// One bin of a [`Reliability`]: predictions in `[predicted_lo_cm, predicted_hi_cm)` (a row of
+/// `dear eval`'s reliability table, as `eval.json` writes it).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct ReliabilityBin {
-    pub lo_cm: f64,
+    pub predicted_lo_cm: f64,
     /// `None`: open above.
-    pub hi_cm: Option<f64>,
+    pub predicted_hi_cm: Option<f64>,
     pub pixels: u64,
     pub mean_predicted_cm: f64,
     pub mean_measured_cm: f64,
@@ -191,12 +192,12 @@ impl Reliability {
             .map(|b| {
                 let n = self.counts[b] as f64;
                 ReliabilityBin {
-                    lo_cm: if b == 0 {
+                    predicted_lo_cm: if b == 0 {
                         0.0
                     } else {
                         RELIABILITY_EDGES_CM[b - 1]
                     },
-                    hi_cm: RELIABILITY_EDGES_CM.get(b).copied(),
+                    predicted_hi_cm: RELIABILITY_EDGES_CM.get(b).copied(),
                     pixels: self.counts[b],
                     mean_predicted_cm: 100.0 * self.predicted[b] / n,
                     mean_measured_cm: 100.0 * self.measured[b] / n,
@@ -315,13 +316,21 @@ mod tests {
         let bins = r.bins();
         assert_eq!(bins.len(), 2);
         assert_eq!(
-            (bins[0].lo_cm, bins[0].hi_cm, bins[0].pixels),
+            (
+                bins[0].predicted_lo_cm,
+                bins[0].predicted_hi_cm,
+                bins[0].pixels
+            ),
             (0.0, Some(0.5), 2)
         );
         assert!((bins[0].mean_predicted_cm - 0.35).abs() < 1e-4);
         assert!((bins[0].mean_measured_cm - 0.3).abs() < 1e-4);
         assert_eq!(
-            (bins[1].lo_cm, bins[1].hi_cm, bins[1].pixels),
+            (
+                bins[1].predicted_lo_cm,
+                bins[1].predicted_hi_cm,
+                bins[1].pixels
+            ),
             (4.0, Some(8.0), 1)
         );
         assert!((bins[1].mean_measured_cm - 10.0).abs() < 1e-3);

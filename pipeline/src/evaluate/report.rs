@@ -5,7 +5,7 @@ use serde::Serialize;
 use super::methods::MethodOutput;
 use crate::capture::Sample;
 use crate::metrics::{
-    aepe, DepthErrorSplit, Reliability, TemporalChange, CLASSES, MAX_EVAL_DEPTH_M,
+    aepe, DepthErrorSplit, Reliability, ReliabilityBin, TemporalChange, CLASSES, MAX_EVAL_DEPTH_M,
 };
 use crate::Flow;
 use ndarray::{Array2, ArrayView2};
@@ -24,17 +24,6 @@ pub struct MethodAccumulator {
     temporal: TemporalChange,
     /// The last frame added: its index, the method's depth and the masked ground truth.
     previous: Option<(u64, Array2<f32>, Array2<f32>)>,
-}
-
-/// One bin of the reliability table (see [`Reliability`]): predictions in `[lo_cm, hi_cm)`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct ReliabilityRow {
-    pub predicted_lo_cm: f64,
-    /// `None`: open above.
-    pub predicted_hi_cm: Option<f64>,
-    pub pixels: u64,
-    pub mean_predicted_cm: f64,
-    pub mean_measured_cm: f64,
 }
 
 /// The summary of one method, as printed and written.
@@ -61,7 +50,7 @@ pub struct MethodReport {
     /// Predicted against measured error per bin, for methods whose confidence is an
     /// expected-error code; empty otherwise.
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub reliability: Vec<ReliabilityRow>,
+    pub reliability: Vec<ReliabilityBin>,
 }
 
 /// An evaluation in progress: one accumulator per method name, in insertion order.
@@ -163,18 +152,7 @@ impl Evaluation {
                         .then(|| acc.aepe_rough_sum / acc.aepe_rough_frames as f64),
                     median_seconds: dear_stats::median(&seconds).unwrap_or(f64::NAN),
                     temporal_change_cm: acc.temporal.mean_cm(),
-                    reliability: acc.reliability.map_or_else(Vec::new, |r| {
-                        r.bins()
-                            .into_iter()
-                            .map(|b| ReliabilityRow {
-                                predicted_lo_cm: b.lo_cm,
-                                predicted_hi_cm: b.hi_cm,
-                                pixels: b.pixels,
-                                mean_predicted_cm: b.mean_predicted_cm,
-                                mean_measured_cm: b.mean_measured_cm,
-                            })
-                            .collect()
-                    }),
+                    reliability: acc.reliability.map_or_else(Vec::new, |r| r.bins()),
                 }
             })
             .collect()
@@ -191,7 +169,8 @@ impl Evaluation {
              |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
         );
         let fmt = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.2}"));
-        for r in self.reports() {
+        let reports = self.reports();
+        for r in &reports {
             out.push_str(&format!(
                 "| {} | {} | {} | {} | {} | {} | {} | {:.1} % | {} | {:.1} |\n",
                 r.method,
@@ -206,7 +185,7 @@ impl Evaluation {
                 1e3 * r.median_seconds
             ));
         }
-        for r in self.reports().iter().filter(|r| !r.reliability.is_empty()) {
+        for r in reports.iter().filter(|r| !r.reliability.is_empty()) {
             out.push_str(&format!(
                 "\nReliability of {}'s expected-error confidence (pixels within 4 m):\n\n\
                  | predicted (cm) | pixels | mean predicted (cm) | mean measured (cm) |\n\

@@ -127,6 +127,7 @@ def warm_start_refine(model: DEAR, bundle: Path) -> list[str]:
         for init in graph.initializer
         if init.name.startswith("net.")
     }
+    # state_dict() shares storage with the parameters: copying into it sets them.
     state = model.refine.state_dict()
     copied = []
     with torch.no_grad():
@@ -148,5 +149,4 @@ def warm_start_refine(model: DEAR, bundle: Path) -> list[str]:
             copied.append(name)
     if not copied:
         raise ValueError(f"warm start: {path} holds none of the refinement net's parameters")
-    model.refine.load_state_dict(state)
     return copied
