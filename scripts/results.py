@@ -463,7 +463,7 @@ def alignment_paragraph(sets: dict[int, dict[str, Report]]) -> str:
         + "). Ours goes further from the rough flow because the chain's final flow is not the "
         "fusion network's: the direct fit to the frame's edges, started from the least-squares "
         "calibration of the rough flow, aligns the frame when it is confident (the fusion "
-        'network runs only where it is not; docs/design.md, "Chain modes"). '
+        'network runs only where it is not; docs/daemon.md, "Chain modes"). '
         + "; ".join(parts)
         + "."
     )

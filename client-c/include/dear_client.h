@@ -40,7 +40,7 @@
  *   else /dev/shm/dear; the installed service's clients set
  *   DEAR_IOX2_ROOT=/run/deard/iceoryx2 and run as a user in the group `dear` (README,
  *   "Where clients find the service", "Apps as other users").
- * - Frame layout, header fields and their meaning: README, "Frame layout".
+ * - Frame layout, header fields and their meaning: docs/protocol.md, "Frame layout".
  *
  * Link: -ldear_client (the shared library), or libdear_client.a with
  * -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc.

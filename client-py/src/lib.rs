@@ -96,7 +96,8 @@ struct Sample {
     _frame: dear_client::Frame,
 }
 
-/// The header of one frame (a copy of the 192-byte `DearFrameHeader`; README "Frame layout").
+/// The header of one frame (a copy of the 192-byte `DearFrameHeader`; docs/protocol.md,
+/// "Frame layout").
 #[pyclass(frozen, module = "dear", name = "Header")]
 struct Header(FrameHeader);
 

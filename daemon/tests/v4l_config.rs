@@ -144,14 +144,15 @@ fn a_missing_module_stops_the_daemon_naming_the_file_or_the_node() {
     );
 }
 
-/// The README's module examples (RealSense-like, Arducam-like) are configurations deard accepts.
+/// docs/live-capture.md's module examples (RealSense-like, Arducam-like) are configurations
+/// deard accepts.
 #[test]
-fn the_readme_module_examples_are_valid_configurations() {
-    let readme = include_str!("../../README.md");
-    let start = readme
+fn the_documented_module_examples_are_valid_configurations() {
+    let doc = include_str!("../../docs/live-capture.md");
+    let start = doc
         .find("## Live capture from a ToF module")
-        .expect("README has the live capture section");
-    let section = &readme[start..];
+        .expect("docs/live-capture.md has the configuration section");
+    let section = &doc[start..];
     let section = &section[..section[3..].find("\n## ").map_or(section.len(), |e| e + 3)];
     let blocks: Vec<&str> = section
         .split("```toml\n")

@@ -95,7 +95,8 @@ impl Stage {
 }
 
 /// The iceoryx2 user header of every published frame. `#[repr(C)]`, naturally aligned, no
-/// implicit padding, 192 bytes; offsets are fixed by the README's table and `tests/layout.rs`.
+/// implicit padding, 192 bytes; offsets are fixed by docs/protocol.md's table and
+/// `tests/layout.rs`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[type_name("DearFrameHeader")]

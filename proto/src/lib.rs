@@ -11,7 +11,7 @@
 //! After each sample the daemon notifies an iceoryx2 *event* service of the same name, so
 //! clients can sleep until a frame arrives instead of polling.
 //!
-//! The README's "Frame layout" section documents the header byte by byte for C and Python
+//! docs/protocol.md, "Frame layout", documents the header byte by byte for C and Python
 //! clients; `tests/layout.rs` checks that table against this struct.
 
 pub mod confidence;

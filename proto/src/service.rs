@@ -76,7 +76,7 @@ pub enum FrameServiceError {
     Name(#[from] ServiceNameError),
     /// Typically: the service exists with other QoS or another header type (a client or
     /// daemon of another protocol version), or the shared memory is not accessible.
-    #[error("cannot open or create the frame service {name:?} (if it exists, another process made it with other QoS or types than this protocol's: README, \"Frame layout\")")]
+    #[error("cannot open or create the frame service {name:?} (if it exists, another process made it with other QoS or types than this protocol's: docs/protocol.md, \"Frame layout\")")]
     OpenOrCreate {
         name: String,
         #[source]

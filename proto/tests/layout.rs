@@ -1,5 +1,5 @@
-//! The README documents the frame header byte by byte for C and Python clients. This test reads
-//! that table and checks every row against the real `#[repr(C)]` struct, so the documentation
+//! docs/protocol.md documents the frame header byte by byte for C and Python clients. This test
+//! reads that table and checks every row against the real `#[repr(C)]` struct, so the documentation
 //! cannot drift from the code.
 
 use std::mem::{offset_of, size_of};
@@ -48,17 +48,17 @@ fn real_fields() -> Vec<(&'static str, usize, usize)> {
     ]
 }
 
-/// Rows of the README table between the `frame-header-table` markers.
+/// Rows of docs/protocol.md's table between the `frame-header-table` markers.
 fn documented_fields() -> Vec<(String, usize, usize)> {
-    let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../README.md"))
-        .expect("README.md");
-    let start = readme
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/protocol.md"))
+        .expect("docs/protocol.md");
+    let start = doc
         .find("<!-- frame-header-table -->")
-        .expect("README has the frame-header-table marker");
-    let end = readme
+        .expect("docs/protocol.md has the frame-header-table marker");
+    let end = doc
         .find("<!-- /frame-header-table -->")
-        .expect("README closes the frame-header-table");
-    readme[start..end]
+        .expect("docs/protocol.md closes the frame-header-table");
+    doc[start..end]
         .lines()
         .filter(|l| l.starts_with('|'))
         .filter_map(|l| {
@@ -72,13 +72,13 @@ fn documented_fields() -> Vec<(String, usize, usize)> {
 }
 
 #[test]
-fn readme_table_matches_the_struct() {
+fn the_protocol_doc_table_matches_the_struct() {
     let real = real_fields();
     let documented = documented_fields();
     assert_eq!(
         documented.len(),
         real.len(),
-        "README documents {} fields, the struct has {}",
+        "docs/protocol.md documents {} fields, the struct has {}",
         documented.len(),
         real.len()
     );

@@ -11,7 +11,7 @@
 each array keeps its sample alive (its `base` owns it). A subscriber holds at most
 `MAX_BORROWED_FRAMES` (2) samples at once; `Frame.release()` (or `with frame:`) gives the
 frame's own reference back, and the sample returns to the subscriber once no array over it
-is left either. The README's "Python" section has the rules.
+is left either. docs/clients.md, "Python", has the rules.
 """
 
 import numpy as np

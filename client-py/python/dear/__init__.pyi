@@ -34,7 +34,7 @@ class ReceiveError(DearError):
     """Receiving or waiting for a frame failed; the message is the Rust error chain."""
 
 class Header:
-    """A copy of the frame's 192-byte header (README "Frame layout")."""
+    """A copy of the frame's 192-byte header (docs/protocol.md "Frame layout")."""
 
     @property
     def version(self) -> int: ...

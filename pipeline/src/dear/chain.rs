@@ -1,4 +1,4 @@
-//! The paper's per-frame chain (docs/design.md, "The equations and where they live") around the
+//! The paper's per-frame chain (docs/algorithm.md, "The equations and where they live") around the
 //! three graphs of a bundle, writing its result into caller-provided views (the daemon passes views of
 //! shared memory, so the published frame is never copied).
 //!

@@ -1,4 +1,4 @@
-"""Reader and writer of the capture-directory format (docs/design.md, "Capture directory format").
+"""Reader and writer of the capture-directory format (docs/capture-format.md).
 
 ```
 capture.json             {"format": "dear-capture", "version": 1, "width", "height",

@@ -1,6 +1,6 @@
 """The whole DEAR pipeline as one differentiable module (end-to-end training and evaluation).
 
-Steps (docs/design.md, "The equations and where they live"): ``W_rough = F(RGB, I)``; ``D_rgb =
+Steps (docs/algorithm.md, "The equations and where they live"): ``W_rough = F(RGB, I)``; ``D_rgb =
 D_tof ∘ W_rough``; per-axis least squares for ``(t, c)``; ``W_convt = t / D_rgb + c``; ``W_refn =
 G(W_rough, W_convt)``; ``D = D_tof ∘ W_refn``, ``I ∘ W_refn``; ``D_out = KPN(I∘W, D/max_depth,
 RGB)``.
