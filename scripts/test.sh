@@ -3,19 +3,53 @@
 # tests. Installs what it needs first (scripts/setup.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+# The time of each tier, printed at the end, whether the run passes or fails (then the tier
+# that failed is marked). `tier NAME` ends the running tier and starts NAME.
+tier_names=()
+tier_seconds=()
+tier_name=""
+tier_start=$SECONDS
+tier() {
+    if [ -n "$tier_name" ]; then
+        tier_names+=("$tier_name")
+        tier_seconds+=($((SECONDS - tier_start)))
+    fi
+    tier_name=$1
+    tier_start=$SECONDS
+    [ -z "$1" ] || echo "== $1"
+}
+print_tier_times() {
+    local rc=$? i
+    local last=$tier_name
+    tier ""
+    echo "== time per tier (s)"
+    for i in "${!tier_names[@]}"; do
+        if [ "$rc" != 0 ] && [ "${tier_names[$i]}" = "$last" ]; then
+            printf '%6d  %s (FAILED)\n' "${tier_seconds[$i]}" "${tier_names[$i]}"
+        else
+            printf '%6d  %s\n' "${tier_seconds[$i]}" "${tier_names[$i]}"
+        fi
+    done
+    printf '%6d  total\n' "$SECONDS"
+    exit "$rc"
+}
+trap print_tier_times EXIT
+
+tier "setup (scripts/setup.sh)"
 scripts/setup.sh
 # A run from a clean clone gains nothing from incremental state, and it is gigabytes.
 export CARGO_INCREMENTAL=0
 # A full disk shows up as a linker "Bus error" far from its cause; say up front what there is.
 df -h . | sed 's/^/disk: /'
 
-echo "== msrv";         python3 scripts/msrv.py
-echo "== cargo fmt";    cargo fmt --all --check
-echo "== cargo clippy"; cargo clippy --workspace --all-targets --quiet -- -D warnings
-echo "== cargo test";   cargo test --workspace
+tier "msrv";         python3 scripts/msrv.py
+tier "cargo fmt";    cargo fmt --all --check
+tier "cargo clippy"; cargo clippy --workspace --all-targets --quiet -- -D warnings
+tier "cargo test";   cargo test --workspace
 # The SDK stays thin: an app linking dear-client gets the protocol and iceoryx2, not the
 # pipeline, tract or the CLI's crates (issue 15).
-echo "== thin SDK"
+tier "thin SDK"
 if cargo tree -p dear-client -e normal --prefix none | grep -E '^(tract|clap|indicatif|dear-pipeline) '; then
     echo "dear-client pulls the crates above; the SDK must not" >&2
     exit 1
@@ -29,20 +63,20 @@ fi
 
 if [ -d train ]; then
     # Two commands, not `a && b`: errexit ignores a failure on the left of `&&`.
-    echo "== ruff";   .venv/bin/ruff check train scripts fixtures tests/scripts client-py
+    tier "ruff";   .venv/bin/ruff check train scripts fixtures tests/scripts client-py
     .venv/bin/ruff format --check train scripts fixtures tests/scripts client-py
-    echo "== pytest"; (cd train && ../.venv/bin/python -m pytest -q tests)
+    tier "pytest"; (cd train && ../.venv/bin/python -m pytest -q tests)
     # The outside aligner's scoring against the shared fixtures (numpy only, no OpenCV).
-    echo "== outside aligner scoring"; .venv/bin/python scripts/outside_aligner.py --check
+    tier "outside aligner scoring"; .venv/bin/python scripts/outside_aligner.py --check
     # The Python client package against a real target/debug/deard (built by cargo test above).
-    echo "== pytest (client-py)"; (cd client-py && ../.venv/bin/python -m pytest -q tests)
+    tier "pytest (client-py)"; (cd client-py && ../.venv/bin/python -m pytest -q tests)
 fi
 
 # The install tier: the README's install recipe and the hardened systemd unit, on this machine
 # (needs root: it adds the deard user and installs into /usr/local and /etc, then removes it
 # all; and release binaries, about 8 minutes to build on 2 cores).
 if [ "$(id -u)" = 0 ]; then
-    echo "== install recipe and unit (scripts/install_test.sh)"
+    tier "install recipe and unit (scripts/install_test.sh)"
     cargo build --release --quiet -p deard -p dear-cli
     # On its own: built with the CLI, the SDK in libdear_client.a would get the CLI's features
     # (images: the pipeline and tract).
@@ -57,7 +91,7 @@ fi
 # deard capturing vivid nodes (depth, RGB, amplitude) with a client checking the depth it
 # receives, through a device loss, and from a replay of its recording. About a minute warm,
 # plus the release build of the three binaries.
-echo "== V4L2 in a VM (scripts/test-v4l2-vm.sh --self-test, --deard)"
+tier "V4L2 in a VM (scripts/test-v4l2-vm.sh --self-test, --deard)"
 cargo build --release --quiet -p deard -p dear-cli -p dear-e2e-tests \
     --bin deard --bin dear --bin dear-v4l-check
 for mode in self-test deard; do
@@ -74,12 +108,12 @@ done
 # x86-64's, a daemon + client exchange over shared memory — then the Debian packages for amd64
 # and arm64 (the arm64 one from the same release build in target/aarch64), installed, run and
 # purged here when root. About 14 minutes on 2 cores, 12 of them the cold aarch64 build.
-echo "== aarch64 under emulation (scripts/test-aarch64.sh)"
+tier "aarch64 under emulation (scripts/test-aarch64.sh)"
 scripts/test-aarch64.sh
-echo "== Debian packages (scripts/build-deb.sh)"
+tier "Debian packages (scripts/build-deb.sh)"
 scripts/build-deb.sh
 if [ "$(id -u)" = 0 ]; then
-    echo "== Debian packages installed and run (scripts/test-deb.sh)"
+    tier "Debian packages installed and run (scripts/test-deb.sh)"
     scripts/test-deb.sh
 else
     echo "== Debian packages installed and run: skipped (needs root; run sudo scripts/test-deb.sh)"
