@@ -136,12 +136,13 @@ def guarded_losses(
     depth_valid: torch.Tensor,
     measured: torch.Tensor,
     depth_term: Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor],
+    harm_weight: float = HARM_WEIGHT,
 ) -> dict[str, torch.Tensor]:
     """The ``guarded`` refiner's loss parts (issue 33), depths in metres.
 
     - ``depth``: ``depth_term`` (L1 + gradient) of the hybrid refinement where a measurement
       was warped;
-    - ``harm``: ``HARM_WEIGHT ·`` mean of how much further from the truth the refinement is than
+    - ``harm``: ``harm_weight ·`` mean of how much further from the truth the refinement is than
       the measurement, where it is (a refiner must not make good depth worse);
     - ``error``: ``ERROR_NLL_WEIGHT ·`` the Laplace NLL of each candidate's expected-error map
       (refined, measurement, classical) wherever that candidate and the truth are valid. The
@@ -158,6 +159,6 @@ def guarded_losses(
     )
     return {
         "depth": depth_term(refined, gt, measured),
-        "harm": HARM_WEIGHT * masked_mean(F.relu(e_refined - e_measured), measured),
+        "harm": harm_weight * masked_mean(F.relu(e_refined - e_measured), measured),
         "error": ERROR_NLL_WEIGHT * nll,
     }

@@ -135,3 +135,35 @@ def test_recipe_record_says_how_far_a_stopped_run_got() -> None:
         "from": "final.pt",
     }
     assert final["validation"] == {"mae": 1.0}
+
+
+def test_refiner_with_frame_level_context_exports_and_matches_onnxruntime(tmp_path: Path) -> None:
+    """The context branch (a mean over the whole frame) exports to plain ONNX ops the daemon's
+    runtime takes, and the graph agrees with PyTorch at another size than the export's."""
+    profile = get_profile("smoke", variant="guarded", refine_context=True)
+    model = build_model(profile).eval()
+    assert model.refine is not None
+    context = model.refine.backbone.context
+    assert context is not None
+    with torch.no_grad():  # a branch that does something (it starts at zero)
+        for p in context.parameters():
+            p.normal_(0, 0.3)
+    out = tmp_path / "bundle"
+    export_bundle(model, profile, out, {}, macs_at=None)
+    ops = {n.op_type for n in onnx.load(str(out / "refine.onnx")).graph.node}
+    assert "ReduceMean" in ops or "GlobalAveragePool" in ops
+    sess = ort.InferenceSession(str(out / "refine.onnx"), providers=["CPUExecutionProvider"])
+    rng = np.random.default_rng(9)
+    amp = rng.random((1, 1, 56, 72), dtype=np.float32)
+    depth = (1 + 3 * rng.random((1, 1, 56, 72))).astype(np.float32)
+    rgb = rng.random((1, 3, 56, 72), dtype=np.float32)
+    classical = (depth + 0.01).astype(np.float32)
+    (got,) = sess.run(None, {"amplitude": amp, "depth": depth, "rgb": rgb, "classical": classical})
+    with torch.no_grad():
+        want = model.refine.head_maps(
+            torch.from_numpy(amp),
+            torch.from_numpy(depth / 10),
+            torch.from_numpy(rgb),
+            torch.from_numpy(classical / 10),
+        )
+    np.testing.assert_allclose(got, want.numpy(), atol=1e-4)

@@ -18,6 +18,7 @@ from dear_train.models.kpn import (
     FilterMode,
     GuardedKernelApply,
     KernelApply,
+    RefineNet,
     filter_mode,
 )
 from dear_train.training.trainer import StageLoss
@@ -342,3 +343,43 @@ def test_guarded_refiner_warm_starts_from_the_shipped_hybrid_bundle() -> None:
     # A bundle whose refiner is not this network's is refused, naming the parameter.
     with pytest.raises(ValueError, match="backbone"):
         warm_start_refine(build_model(get_profile("cpu")), bundle)
+
+
+def test_frame_level_context_starts_as_the_net_without_it() -> None:
+    """Warm-starting a context net from a plain one changes nothing until training moves the
+    branch's last convolution off zero; then a change far away reaches pixels that the plain
+    net's receptive field does not."""
+    plain = build_refine("edge", "guarded")
+    ctx = build_refine("edge", "guarded", global_context=True)
+    missing = ctx.load_state_dict(plain.state_dict(), strict=False).missing_keys
+    assert missing and all(k.startswith("backbone.context.") for k in missing)
+    torch.manual_seed(1)
+    amp, depth = torch.rand(1, 1, 64, 192), 0.1 + 0.3 * torch.rand(1, 1, 64, 192)
+    rgb, classical = torch.rand(1, 3, 64, 192), depth + 0.001
+
+    def left_change(net: RefineNet) -> float:
+        """How much the left sixth's maps move when the deepest features of the right third
+        change (a random encoder barely passes input changes that deep, so they are set)."""
+
+        def right_third(_m: torch.nn.Module, _i: object, e3: torch.Tensor) -> torch.Tensor:
+            e3 = e3.clone()
+            e3[..., :, 2 * e3.shape[-1] // 3 :] += 1.0
+            return e3
+
+        a = net.head_maps(amp, depth, rgb, classical)[..., :, :4]
+        hook = net.backbone.enc3.register_forward_hook(right_third)
+        b = net.head_maps(amp, depth, rgb, classical)[..., :, :4]
+        hook.remove()
+        return float((a - b).abs().max())
+
+    with torch.no_grad():
+        assert torch.equal(
+            plain.head_maps(amp, depth, rgb, classical), ctx.head_maps(amp, depth, rgb, classical)
+        )
+        # A head that is not near zero (it starts at 1 %), the same in both nets.
+        plain.backbone.head.weight.normal_(0, 0.3)
+        ctx.backbone.head.weight.copy_(plain.backbone.head.weight)
+        for p in ctx.backbone.context.parameters():
+            p.normal_(0, 0.3)
+        assert left_change(plain) < 1e-6
+        assert left_change(ctx) > 1e-4

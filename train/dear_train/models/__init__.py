@@ -41,10 +41,15 @@ def build_fusion(tier: str) -> FusionNet:
     return FusionNet(FusionConfig()) if tier == "paper" else edge_fusion()
 
 
-def build_refine(tier: str, variant: str = "kpn") -> RefineNet:
-    """The refinement net of ``tier`` and ``variant``."""
+def build_refine(tier: str, variant: str = "kpn", global_context: bool = False) -> RefineNet:
+    """The refinement net of ``tier`` and ``variant`` (``global_context``: the frame-level
+    context branch; edge tier only)."""
     _check_tier(tier)
-    return paper_refine(variant) if tier == "paper" else edge_refine(variant)
+    if tier == "paper":
+        if global_context:
+            raise ValueError("the frame-level context branch exists for the edge tier only")
+        return paper_refine(variant)
+    return edge_refine(variant, global_context)
 
 
 def param_count(model: nn.Module) -> int:

@@ -21,6 +21,8 @@ Same architectures and I/O as the paper tier, so the daemon runs either bundle u
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from dear_train.models.flownetc import FlowNetC, FlowNetCConfig
 from dear_train.models.fusion import FusionConfig, FusionNet
 from dear_train.models.kpn import RefineNet, UNetConfig, applies_maps
@@ -47,6 +49,8 @@ def edge_fusion() -> FusionNet:
     return FusionNet(EDGE_FUSION)
 
 
-def edge_refine(variant: str = "kpn") -> RefineNet:
-    """The edge-tier refinement net (any variant of :mod:`dear_train.models.kpn`)."""
-    return RefineNet(variant, EDGE_GATED_REFINE if applies_maps(variant) else EDGE_REFINE)
+def edge_refine(variant: str = "kpn", global_context: bool = False) -> RefineNet:
+    """The edge-tier refinement net (any variant of :mod:`dear_train.models.kpn`), optionally
+    with the frame-level context branch (:class:`~dear_train.models.kpn.UNetConfig`)."""
+    config = EDGE_GATED_REFINE if applies_maps(variant) else EDGE_REFINE
+    return RefineNet(variant, replace(config, global_context=global_context))

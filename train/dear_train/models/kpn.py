@@ -299,6 +299,12 @@ class UNetConfig:
     #: gated edge refiner: 4); its kernel maps are upsampled bilinearly and applied at full
     #: resolution.
     backbone_stride: int = 1
+    #: Frame-level context (issue 33): the deepest features' mean over the whole frame, through
+    #: two 1×1 convolutions, is added back to every position. A 3×3 U-Net sees ~100 px; whether
+    #: a frame has multi-path at all (rooms whose walls bulge, amplitude above what the
+    #: geometry explains) is a property of the whole frame. The second convolution starts at
+    #: zero, so a warm-started net begins exactly where it was.
+    global_context: bool = False
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -332,6 +338,12 @@ class UNet(nn.Module):
         self.up0 = deconv(w1, w0, k=3)
         self.dec0 = conv(2 * w0, w0, 3, 1, s)
         self.head = nn.Conv2d(w0, cout, 3, 1, 1)
+        self.context: nn.Module | None = None
+        if config.global_context:
+            last = nn.Conv2d(w3, w3, 1)
+            nn.init.zeros_(last.weight)
+            nn.init.zeros_(last.bias)
+            self.context = nn.Sequential(nn.Conv2d(w3, w3, 1), nn.ReLU(inplace=True), last)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         out = self.forward_lowres(x)
@@ -345,6 +357,8 @@ class UNet(nn.Module):
         e1 = self.enc1(e0)
         e2 = self.enc2(e1)
         e3 = self.enc3(e2)
+        if self.context is not None:
+            e3 = e3 + self.context(e3.mean(dim=(2, 3), keepdim=True))
         d2 = self.dec2(torch.cat([e2, crop_like(self.up2(e3), e2)], dim=1))
         d1 = self.dec1(torch.cat([e1, crop_like(self.up1(d2), e1)], dim=1))
         d0 = self.dec0(torch.cat([e0, crop_like(self.up0(d1), e0)], dim=1))

@@ -48,6 +48,18 @@ def main(argv: list[str] | None = None) -> None:
         help="train these refinement variants side by side on identical batches "
         "(refine-only profiles; one run directory per variant under OUT)",
     )
+    p.add_argument(
+        "--refine-context",
+        choices=("on", "off"),
+        default=None,
+        help="override the profile's frame-level context branch of the refiner (edge tier)",
+    )
+    p.add_argument(
+        "--harm-weight",
+        type=float,
+        default=None,
+        help="override the profile's weight of the guarded refiner's harm term",
+    )
     p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: auto)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoints/last.pt")
     p.add_argument(
@@ -68,7 +80,14 @@ def main(argv: list[str] | None = None) -> None:
         if not (syn / "capture.json").exists():
             write_synthetic_capture(syn, frames=8)
         data.append(syn)
-    profile = get_profile(a.profile, tier=a.tier, variant=a.variant)
+    overrides: dict[str, object] = {"tier": a.tier, "variant": a.variant}
+    if a.refine_context is not None:
+        overrides["refine_context"] = a.refine_context == "on"
+    if a.harm_weight is not None:
+        if not a.harm_weight >= 0:
+            p.error(f"--harm-weight must be a non-negative number, not {a.harm_weight}")
+        overrides["harm_weight"] = a.harm_weight
+    profile = get_profile(a.profile, **overrides)
     if a.variants:
         if a.variant:
             p.error("--variants names the variants; it takes no --variant")

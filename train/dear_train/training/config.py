@@ -1,6 +1,6 @@
 """Training profiles and the staged schedule.
 
-The paper's schedule (docs/design.md, "Profiles and schedule"): FlowNetC alone → FlowNetC + fusion;
+The paper's schedule (docs/training.md, "Profiles"): FlowNetC alone → FlowNetC + fusion;
 ToF-KPN in parallel (independent of the flow stages, here run after them in the same process); then
 an end-to-end fine-tune. Each stage has its own epochs and learning rate; the learning rate is
 multiplied by ``lr_decay`` every ``lr_decay_every`` epochs.
@@ -19,6 +19,8 @@ Profiles:
   expected-error maps: each pixel publishes the candidate, refined / measured / classical, with
   the smallest expected error), on the ``broad`` family.
 - ``cpu-ablation``: cpu-gated on a 4-epoch schedule, for the variants trained side by side.
+- ``gpu-guarded``: cpu-guarded with the frame-level context branch on one GPU (larger crops and
+  batches, 9 epochs of 250 steps).
 - ``gpu``: the paper's recipe: paper tier, Adam, batch 3, crops 384×512, lr 4e-4 (1e-5 for the
   fine-tune), ×0.7 every 2 epochs; 20 + 20 + 40 + 10 epochs.
 """
@@ -66,6 +68,10 @@ class Profile:
     #: Cap on validation batches per epoch.
     max_val_batches: int | None = None
     num_workers: int = 2
+    #: The refiner's frame-level context branch (``UNetConfig.global_context``; edge tier).
+    refine_context: bool = False
+    #: Weight of the ``guarded`` variant's harm term (``losses.guarded_losses``).
+    harm_weight: float = 1.0
     seed: int = 0
     augment: AugmentConfig = field(default_factory=AugmentConfig)
     norm: Normalisation = field(default_factory=Normalisation)
@@ -159,6 +165,22 @@ PROFILES: dict[str, Profile] = {
     # an estimated 5 min idle).
     "cpu-ablation": replace(
         CPU_GATED, name="cpu-ablation", stages=(Stage("refine", 4, 1e-3),), lr_decay_every=2
+    ),
+    # Issue 33 on one GPU (a lent H100, ~6 minutes): cpu-guarded's recipe with the refiner's
+    # frame-level context branch, larger crops and batches, many more steps. Warm-started from
+    # models/edge-guarded. Loader workers are few because three runs shared 16 cores.
+    "gpu-guarded": replace(
+        CPU_GATED,
+        name="gpu-guarded",
+        variant="guarded",
+        refine_context=True,
+        crop=(224, 320),
+        batch_size=16,
+        stages=(Stage("refine", 9, 5e-4),),
+        lr_decay_every=3,
+        max_steps_per_epoch=250,
+        max_val_batches=4,
+        num_workers=5,
     ),
     "gpu": Profile(
         name="gpu",

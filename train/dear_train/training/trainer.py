@@ -17,6 +17,7 @@ from dear_train.evaluation import evaluate
 from dear_train.losses import (
     FUSION_WEIGHTS,
     GRADIENT_WEIGHT,
+    HARM_WEIGHT,
     depth_l2_loss,
     depth_loss,
     flownet_weights,
@@ -56,11 +57,14 @@ class StageLoss(nn.Module):
     ``forward``, and ``find_unused_parameters`` covers the nets a stage leaves alone.
     """
 
-    def __init__(self, model: DEAR, stage: str, variant: str) -> None:
+    def __init__(
+        self, model: DEAR, stage: str, variant: str, harm_weight: float = HARM_WEIGHT
+    ) -> None:
         super().__init__()
         self.model = model
         self.stage = stage
         self.variant = variant
+        self.harm_weight = harm_weight
 
     def _depth(self, pred: torch.Tensor, gt: torch.Tensor, valid: torch.Tensor) -> torch.Tensor:
         if self.variant == "deeptof":
@@ -82,7 +86,9 @@ class StageLoss(nn.Module):
             # every hole edge that the gradient term saw.
             measured = depth_valid & r["depth_warped_valid"]
             if self.variant == "guarded":
-                parts.update(guarded_losses(r, gt, depth_valid, measured, self._depth))
+                parts.update(
+                    guarded_losses(r, gt, depth_valid, measured, self._depth, self.harm_weight)
+                )
             else:
                 parts["depth"] = self._depth(r["depth"], gt, measured)
         else:
@@ -245,7 +251,7 @@ class Trainer:
             if self.resume_state is not None and si == start_stage and first_epoch > 0:
                 opt.load_state_dict(self.resume_state["optimizer"])
                 sched.load_state_dict(self.resume_state["scheduler"])
-            loss_mod: nn.Module = StageLoss(self.model, stage.name, p.variant)
+            loss_mod: nn.Module = StageLoss(self.model, stage.name, p.variant, p.harm_weight)
             if self.dist.enabled:
                 loss_mod = DistributedDataParallel(loss_mod, find_unused_parameters=True)
             loader = self._loader(self.train_set, shuffle=True)
