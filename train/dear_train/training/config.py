@@ -1,6 +1,7 @@
 """Training profiles and the staged schedule.
 
-The paper's schedule (docs/training.md, "Profiles"): FlowNetC alone → FlowNetC + fusion;
+The paper's schedule (docs/training.md, "Profiles and schedule"): FlowNetC alone →
+FlowNetC + fusion;
 ToF-KPN in parallel (independent of the flow stages, here run after them in the same process); then
 an end-to-end fine-tune. Each stage has its own epochs and learning rate; the learning rate is
 multiplied by ``lr_decay`` every ``lr_decay_every`` epochs.
