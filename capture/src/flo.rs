@@ -6,7 +6,7 @@
 //! infinity are not a convention of the format: a file holding them is refused (by the Python
 //! reader too), so no ground truth reaches a metric or a loss as NaN.
 
-use std::fs::{self, File};
+use std::fs;
 use std::io::Read;
 use std::path::Path;
 
@@ -36,7 +36,7 @@ pub fn read_flo(path: &Path, size: Option<(u32, u32)>) -> Result<Flow, CaptureEr
         expected: expected.to_string(),
         found,
     };
-    let mut file = File::open(path).map_err(|e| CaptureError::io(path, e))?;
+    let mut file = crate::input::open_regular(path).map_err(|e| CaptureError::io(path, e))?;
     let file_len = file
         .metadata()
         .map_err(|e| CaptureError::io(path, e))?

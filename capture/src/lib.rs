@@ -16,6 +16,7 @@ pub mod calibration;
 pub mod error;
 pub mod flo;
 pub mod frame;
+pub mod input;
 pub mod layout;
 pub mod manifest;
 pub mod png;

@@ -16,6 +16,11 @@ use serde::{Deserialize, Serialize};
 use crate::calibration::Calibration;
 
 /// The value of [`CaptureManifest::format`].
+/// The largest `depth_scale`: one centimetre per unit, so the 16-bit range reaches 655 m, far
+/// beyond any ToF module. A larger one (1e30 was accepted) makes every valid pixel a depth no
+/// sensor measures.
+pub const MAX_DEPTH_SCALE: f32 = 0.01;
+
 pub const FORMAT_NAME: &str = "dear-capture";
 /// The manifest version this code writes and reads.
 pub const FORMAT_VERSION: u32 = 1;
@@ -97,8 +102,9 @@ pub struct CaptureManifest {
     /// (identity when absent).
     #[serde(default)]
     pub initial_calibration: Calibration,
-    /// Metres per unit of the 16-bit depth PNGs (0.001 = millimetres).
-    #[schemars(range(max = f32::MAX), extend("exclusiveMinimum" = 0))]
+    /// Metres per unit of the 16-bit depth PNGs (0.001 = millimetres); at most
+    /// [`MAX_DEPTH_SCALE`].
+    #[schemars(range(max = MAX_DEPTH_SCALE), extend("exclusiveMinimum" = 0))]
     pub depth_scale: f32,
     /// ToF modulation frequencies in Hz (empty when unknown), each positive.
     #[serde(default)]
@@ -176,9 +182,10 @@ impl CaptureManifest {
                 return Err(format!("field `{name}` is {side}, expected 1..={MAX_SIDE}"));
             }
         }
-        if !(self.depth_scale > 0.0 && self.depth_scale.is_finite()) {
+        if !(self.depth_scale > 0.0 && self.depth_scale <= MAX_DEPTH_SCALE) {
             return Err(format!(
-                "field `depth_scale` is {}, expected a positive number",
+                "field `depth_scale` is {}, expected metres per unit in (0, {MAX_DEPTH_SCALE}] \
+                 (0.001 = millimetres)",
                 self.depth_scale
             ));
         }

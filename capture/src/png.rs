@@ -6,7 +6,6 @@
 //! image. A small file that declares 16000x16000 is refused in microseconds instead of costing
 //! seconds and half a gigabyte, and behind it the good frames keep flowing.
 
-use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
 
@@ -84,7 +83,7 @@ fn decode(
     size: Option<(u32, u32)>,
     plane: Plane,
 ) -> Result<DynamicImage, CaptureError> {
-    let mut file = File::open(path).map_err(|e| CaptureError::io(path, e))?;
+    let mut file = crate::input::open_regular(path).map_err(|e| CaptureError::io(path, e))?;
     let (w, h) = declared_size(path, &mut file)?;
     match size {
         Some(expected) if (w, h) != expected => {

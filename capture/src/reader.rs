@@ -1,6 +1,5 @@
 //! Opening and validating a capture directory, and reading its frames.
 
-use std::fs;
 use std::path::{Path, PathBuf};
 
 use crate::error::CaptureError;
@@ -8,6 +7,10 @@ use crate::frame::{GroundTruth, RgbdFrame, Sample};
 use crate::layout::{FramePaths, MANIFEST_FILE};
 use crate::manifest::CaptureManifest;
 use crate::{flo, png};
+
+/// The largest `capture.json` read: a manifest takes about 60 bytes a frame, so this is
+/// room for about a million frames (15 hours at 20 fps).
+pub const MANIFEST_LIMIT: u64 = 64 << 20;
 
 /// An opened, validated capture directory. Frames are read on demand, so a bad frame costs an
 /// error for that frame only.
@@ -22,7 +25,8 @@ impl CaptureDir {
     pub fn open(root: impl AsRef<Path>) -> Result<Self, CaptureError> {
         let root = root.as_ref().to_owned();
         let path = root.join(MANIFEST_FILE);
-        let text = fs::read_to_string(&path).map_err(|e| CaptureError::io(&path, e))?;
+        let text = crate::input::read_text_limited(&path, MANIFEST_LIMIT)
+            .map_err(|e| CaptureError::io(&path, e))?;
         let manifest = CaptureManifest::from_json(&text)
             .map_err(|message| CaptureError::Manifest { path, message })?;
         Ok(CaptureDir { root, manifest })

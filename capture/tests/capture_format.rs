@@ -2,6 +2,7 @@
 //! reported with the name of the damaged file.
 
 use std::fs;
+use std::path::Path;
 
 use dear_capture::{
     png, CaptureDir, CaptureError, CaptureManifest, CaptureWriter, GroundTruth, Intrinsics, Sample,
@@ -184,6 +185,15 @@ fn bad_manifest_names_the_field() {
             text.replace("\"depth_scale\": 0.001", "\"depth_scale\": -1.0"),
             "depth_scale",
         ),
+        // Issue 34: 1e30 was accepted and every valid pixel published beyond 65 m.
+        (
+            text.replace("\"depth_scale\": 0.001", "\"depth_scale\": 1e30"),
+            "depth_scale",
+        ),
+        (
+            text.replace("\"depth_scale\": 0.001", "\"depth_scale\": 0.011"),
+            "depth_scale",
+        ),
         (text.replace("\"width\": 8", "\"width\": 0"), "width"),
         (
             text.replace("\"format\": \"dear-capture\"", "\"format\": \"other\""),
@@ -226,4 +236,42 @@ fn writer_refuses_a_non_empty_directory_and_out_of_order_frames() {
     let mut writer = CaptureWriter::create(tmp.path().join("b"), manifest).unwrap();
     writer.write_frame(&sample(3).frame).unwrap();
     assert!(writer.write_frame(&sample(2).frame).is_err());
+}
+
+/// Issue 34: a FIFO or a device where a capture file is expected is refused by its type, without
+/// opening it (a FIFO blocked the reader until a writer came; `/dev/zero` as `capture.json`
+/// grew to gigabytes), and the error names the file.
+#[test]
+fn a_fifo_or_device_in_a_capture_is_refused_naming_the_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("cap");
+    write_capture(&dir, 2);
+    let mkfifo = |path: &Path| {
+        fs::remove_file(path).unwrap();
+        let status = std::process::Command::new("mkfifo")
+            .arg(path)
+            .status()
+            .unwrap();
+        assert!(status.success());
+    };
+    let cap = CaptureDir::open(&dir).unwrap();
+    let rgb = cap.frame_paths(1).rgb;
+    mkfifo(&rgb);
+    expect_err_naming(cap.read_frame(1), &rgb, "a FIFO");
+    cap.read_frame(0).unwrap();
+
+    let manifest = dir.join("capture.json");
+    mkfifo(&manifest);
+    let msg = CaptureDir::open(&dir).unwrap_err().to_string();
+    assert!(
+        msg.contains("capture.json") && msg.contains("a FIFO"),
+        "{msg}"
+    );
+    fs::remove_file(&manifest).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", &manifest).unwrap();
+    let msg = CaptureDir::open(&dir).unwrap_err().to_string();
+    assert!(
+        msg.contains("capture.json") && msg.contains("a character device"),
+        "{msg}"
+    );
 }

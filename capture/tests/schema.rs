@@ -44,6 +44,10 @@ fn the_schema_carries_the_readers_bounds() {
     }
     assert_eq!(prop(&s, "depth_scale")["exclusiveMinimum"], 0);
     assert_eq!(
+        prop(&s, "depth_scale")["maximum"].as_f64(),
+        Some(f64::from(dear_capture::manifest::MAX_DEPTH_SCALE))
+    );
+    assert_eq!(
         prop(&s, "modulation_frequencies_hz")["items"]["exclusiveMinimum"],
         0
     );
