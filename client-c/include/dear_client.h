@@ -95,6 +95,20 @@
 // `dear_confidence_expected_error_m`).
 #define DEAR_FLAG_CONFIDENCE_EXPECTED_ERROR (1 << 6)
 
+// `dear_header.calib_health`: not assessed (static calibration, no estimate yet, or an older
+// publisher).
+#define DEAR_CALIB_HEALTH_UNKNOWN 0
+
+// `dear_header.calib_health`: the evidence agrees with the calibration to 1 px.
+#define DEAR_CALIB_HEALTH_GOOD 1
+
+// `dear_header.calib_health`: usable; a 1–3 px correction is pending or some direction is
+// not yet known to 1 px.
+#define DEAR_CALIB_HEALTH_CAN_IMPROVE 2
+
+// `dear_header.calib_health`: the evidence says the calibration is off by 3 px or more.
+#define DEAR_CALIB_HEALTH_NEEDS_RECALIBRATION 3
+
 // What a function of this library did. `DEAR_OK` and `DEAR_TIMEOUT` are not failures; every
 // negative value is one, and `dear_last_error()` then says what failed and why.
 typedef enum dear_status {
@@ -183,8 +197,13 @@ typedef struct dear_header {
   uint64_t run_id;
   // Samples this publisher instance sent before this one; a gap is frames this client lost.
   uint64_t sequence;
+  // Calibration health, `DEAR_CALIB_HEALTH_*`: 0 unknown, 1 good, 2 can improve, 3 needs
+  // recalibration (docs/calibration-health.md).
+  uint8_t calib_health;
+  // Directions of (t_x, t_y, c_x, c_y) the last calibration measurement constrained, 0–4.
+  uint8_t calib_constrained;
   // Zero.
-  uint8_t reserved[8];
+  uint8_t reserved[6];
 } dear_header;
 
 #ifdef __cplusplus

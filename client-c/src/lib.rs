@@ -86,7 +86,25 @@ pub const DEAR_FLAG_NETWORK_OUTPUT_REJECTED: u32 = 1 << 5;
 /// `dear_confidence_expected_error_m`).
 pub const DEAR_FLAG_CONFIDENCE_EXPECTED_ERROR: u32 = 1 << 6;
 
+/// `dear_header.calib_health`: not assessed (static calibration, no estimate yet, or an older
+/// publisher).
+pub const DEAR_CALIB_HEALTH_UNKNOWN: u8 = 0;
+/// `dear_header.calib_health`: the evidence agrees with the calibration to 1 px.
+pub const DEAR_CALIB_HEALTH_GOOD: u8 = 1;
+/// `dear_header.calib_health`: usable; a 1–3 px correction is pending or some direction is
+/// not yet known to 1 px.
+pub const DEAR_CALIB_HEALTH_CAN_IMPROVE: u8 = 2;
+/// `dear_header.calib_health`: the evidence says the calibration is off by 3 px or more.
+pub const DEAR_CALIB_HEALTH_NEEDS_RECALIBRATION: u8 = 3;
+
 const _: () = {
+    assert!(DEAR_CALIB_HEALTH_UNKNOWN == dear_proto::CalibrationHealth::Unknown as u8);
+    assert!(DEAR_CALIB_HEALTH_GOOD == dear_proto::CalibrationHealth::Good as u8);
+    assert!(DEAR_CALIB_HEALTH_CAN_IMPROVE == dear_proto::CalibrationHealth::CanImprove as u8);
+    assert!(
+        DEAR_CALIB_HEALTH_NEEDS_RECALIBRATION
+            == dear_proto::CalibrationHealth::NeedsRecalibration as u8
+    );
     assert!(DEAR_MAX_HELD_FRAMES == dear_proto::service::QOS_SUBSCRIBER_BORROWED);
     assert!(DEAR_FORMAT_VERSION == dear_proto::FORMAT_VERSION);
     assert!(DEAR_MAGIC == dear_proto::MAGIC);
@@ -157,8 +175,13 @@ pub struct dear_header {
     pub run_id: u64,
     /// Samples this publisher instance sent before this one; a gap is frames this client lost.
     pub sequence: u64,
+    /// Calibration health, `DEAR_CALIB_HEALTH_*`: 0 unknown, 1 good, 2 can improve, 3 needs
+    /// recalibration (docs/calibration-health.md).
+    pub calib_health: u8,
+    /// Directions of (t_x, t_y, c_x, c_y) the last calibration measurement constrained, 0–4.
+    pub calib_constrained: u8,
     /// Zero.
-    pub reserved: [u8; 8],
+    pub reserved: [u8; 6],
 }
 
 // The mirror has the protocol struct's size, alignment and every field's offset; with
@@ -198,6 +221,8 @@ const _: () = {
         frames_dropped,
         run_id,
         sequence,
+        calib_health,
+        calib_constrained,
         reserved,
     );
 };
@@ -232,6 +257,8 @@ impl dear_header {
             frames_dropped,
             run_id,
             sequence,
+            calib_health,
+            calib_constrained,
             reserved,
         } = *h;
         dear_header {
@@ -260,6 +287,8 @@ impl dear_header {
             frames_dropped,
             run_id,
             sequence,
+            calib_health,
+            calib_constrained,
             reserved,
         }
     }

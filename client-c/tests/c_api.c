@@ -103,6 +103,8 @@ static void check_frame(const dear_frame *frame) {
               h->confidence_offset == 7 * pixels && h->payload_size == 8 * pixels,
           "offsets of a %" PRIu32 "x%" PRIu32 " frame", h->width, h->height);
     CHECK(h->run_id != 0, "deard draws a run id");
+    CHECK(h->calib_health <= DEAR_CALIB_HEALTH_NEEDS_RECALIBRATION && h->calib_constrained <= 4,
+          "calibration health %u, %u directions", h->calib_health, h->calib_constrained);
     size_t n_depth = 0, n_rgb = 0, n_conf = 0;
     const float *depth = dear_frame_depth(frame, &n_depth);
     const uint8_t *rgb = dear_frame_rgb(frame, &n_rgb);

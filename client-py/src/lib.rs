@@ -166,6 +166,23 @@ impl Header {
     fn calib_age_frames(&self) -> u32 {
         self.0.calib_age_frames
     }
+    /// Calibration health: `"unknown"`, `"good"`, `"can improve"` or `"needs recalibration"`
+    /// (docs/calibration-health.md).
+    #[getter]
+    fn calib_health(&self) -> &'static str {
+        self.0.calibration_health().name()
+    }
+    /// The header's calibration health byte: 0 unknown, 1 good, 2 can improve, 3 needs
+    /// recalibration.
+    #[getter]
+    fn calib_health_code(&self) -> u8 {
+        self.0.calib_health
+    }
+    /// Directions of (t_x, t_y, c_x, c_y) the last calibration measurement constrained, 0–4.
+    #[getter]
+    fn calib_constrained(&self) -> u8 {
+        self.0.calib_constrained
+    }
     /// Processing flags: `dear.FLAG_*` bits.
     #[getter]
     fn flags(&self) -> u32 {

@@ -94,6 +94,12 @@ def test_frames_header_shapes_and_views(service: str) -> None:
                 assert not h.flags & (dear.FLAG_REFINED_NETWORK | dear.FLAG_REFINED_CLASSICAL)
                 assert h.bundle == ""
                 assert h.calib_quality == 0.0 and np.isnan(h.calib_residual_px)
+                # Static calibration: the health is not assessed.
+                assert (h.calib_health, h.calib_health_code, h.calib_constrained) == (
+                    "unknown",
+                    0,
+                    0,
+                )
                 assert 0 < h.publish_timestamp_ns <= time.monotonic_ns()
                 assert list(h.stage_latency_us) == [
                     "capture",

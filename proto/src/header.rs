@@ -155,8 +155,15 @@ pub struct FrameHeader {
     /// restarts when a replay loops and skips over bad input). A gap seen by a client is the
     /// number of samples it lost (overwritten in its queue because it read too slowly).
     pub sequence: u64,
+    /// The calibration's health, a [`crate::CalibrationHealth`] code: 0 unknown, 1 good, 2 can
+    /// improve, 3 needs recalibration (docs/calibration-health.md). Taken from `reserved` in
+    /// format 2: an older publisher sends 0, "unknown".
+    pub calib_health: u8,
+    /// Directions of `(t_x, t_y, c_x, c_y)` the last calibration measurement's frame
+    /// constrained, 0–4 (4 also when the measurement carried no observability); 0 before any.
+    pub calib_constrained: u8,
     /// Zero; room for additions without changing the size.
-    pub reserved: [u8; 8],
+    pub reserved: [u8; 6],
 }
 
 const _: () = assert!(core::mem::size_of::<FrameHeader>() == 192);
@@ -216,7 +223,9 @@ impl FrameHeader {
             frames_dropped: 0,
             run_id: 0,
             sequence: 0,
-            reserved: [0; 8],
+            calib_health: 0,
+            calib_constrained: 0,
+            reserved: [0; 6],
         })
     }
 
@@ -238,6 +247,11 @@ impl FrameHeader {
             end -= 1;
         }
         self.bundle[..end].copy_from_slice(&name.as_bytes()[..end]);
+    }
+
+    /// [`calib_health`](Self::calib_health) as a state (unknown codes read as `Unknown`).
+    pub fn calibration_health(&self) -> crate::CalibrationHealth {
+        crate::CalibrationHealth::from_code(self.calib_health)
     }
 
     /// Latency of one stage in µs.

@@ -16,6 +16,7 @@
 
 pub mod confidence;
 pub mod header;
+pub mod health;
 pub mod service;
 pub mod time;
 pub mod transport;
@@ -24,6 +25,7 @@ pub use header::{
     flags, random_run_id, FrameHeader, HeaderError, LayoutError, PayloadLayout, Stage,
     FORMAT_VERSION, MAGIC, PAYLOAD_ALIGNMENT,
 };
+pub use health::CalibrationHealth;
 pub use service::{
     default_service_name, frame_event_service, frame_service, samples_in_shared_memory,
     validate_service_name, EventServiceError, FrameEventService, FrameService, FrameServiceError,

@@ -44,6 +44,8 @@ fn real_fields() -> Vec<(&'static str, usize, usize)> {
         field!(frames_dropped),
         field!(run_id),
         field!(sequence),
+        field!(calib_health),
+        field!(calib_constrained),
         field!(reserved),
     ]
 }
@@ -124,10 +126,19 @@ fn version_2_fields_sit_where_reserved_was() {
     );
     assert_eq!(offset_of!(FrameHeader, run_id), 168);
     assert_eq!(offset_of!(FrameHeader, sequence), 176);
-    assert_eq!(offset_of!(FrameHeader, reserved), 184);
+    // Issue 32: the calibration health and its observability, from the reserved bytes too
+    // (0 = unknown, what an older publisher sends).
+    assert_eq!(offset_of!(FrameHeader, calib_health), 184);
+    assert_eq!(offset_of!(FrameHeader, calib_constrained), 185);
+    assert_eq!(offset_of!(FrameHeader, reserved), 186);
     assert_eq!(size_of::<FrameHeader>(), 192, "the header keeps its size");
     let h = FrameHeader::new(7, 4, 3);
-    assert_eq!((h.run_id, h.sequence, h.reserved), (0, 0, [0; 8]));
+    assert_eq!((h.run_id, h.sequence, h.reserved), (0, 0, [0; 6]));
+    assert_eq!((h.calib_health, h.calib_constrained), (0, 0));
+    assert_eq!(
+        h.calibration_health(),
+        dear_proto::CalibrationHealth::Unknown
+    );
 }
 
 #[test]

@@ -64,6 +64,15 @@ class Header:
     @property
     def calib_age_frames(self) -> int: ...
     @property
+    def calib_health(self) -> str:
+        """`"unknown"`, `"good"`, `"can improve"` or `"needs recalibration"`."""
+    @property
+    def calib_health_code(self) -> int:
+        """0 unknown, 1 good, 2 can improve, 3 needs recalibration."""
+    @property
+    def calib_constrained(self) -> int:
+        """Directions of (t_x, t_y, c_x, c_y) the last measurement constrained, 0-4."""
+    @property
     def flags(self) -> int:
         """`FLAG_*` bits."""
     @property
