@@ -61,6 +61,7 @@ use ndarray::{Array2, ArrayView2, ArrayView3};
 use crate::calibration::Calibration;
 use crate::edges::{gradient_magnitude, normalise_by_p99, rgb_to_gray};
 use crate::geometry::surface::is_valid_depth;
+use crate::online::observability::{Information, EDGE_PIXELS_PER_SAMPLE};
 
 /// Settings of [`estimate_calibration_direct`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -144,6 +145,13 @@ pub struct DirectFit {
     pub fell_back: bool,
     /// Whether `t` was fitted (false: held at its initial value, too little depth spread).
     pub baseline_fitted: bool,
+    /// How well the frame's edges constrain each direction of `(t, c)` at the returned
+    /// calibration ([`crate::online::observability`]): the Gauss–Newton normal matrix at the
+    /// finest level, `(α, β)` eliminated (Schur complement), over the residual variance and
+    /// [`EDGE_PIXELS_PER_SAMPLE`]. When `t` was held, only the flow at the edges' mean inverse
+    /// depth `ā` was fitted: the information is that of `t·ā + c` alone (rank 2). Zero when the
+    /// fit fell back.
+    pub information: Information,
 }
 
 /// One pyramid level: the ToF side (edge map, inverse depth of the nearest surface, 0 =
@@ -176,6 +184,7 @@ pub fn estimate_calibration_direct(
         initial_correlation: correlation,
         fell_back: true,
         baseline_fitted: false,
+        information: Information::ZERO,
     };
     assert_eq!(
         amplitude.dim(),
@@ -229,7 +238,59 @@ pub fn estimate_calibration_direct(
         initial_correlation: initial_correlation as f32,
         fell_back: false,
         baseline_fitted: fit_t,
+        information: information_at(fine, &theta, fit_t),
     }
+}
+
+/// The information of the fit at `theta` on `level` (see [`DirectFit::information`]).
+// Small dense linear algebra reads best with indices.
+#[allow(clippy::needless_range_loop)]
+fn information_at(level: &Level, theta: &Theta, fit_t: bool) -> Information {
+    let pass = normal_equations(level, theta, 0.0);
+    let h = pass.hm;
+    // Schur complement of the photometric (α, β) block.
+    let (a, b, d) = (h[4][4], h[4][5], h[5][5]);
+    let det = a * d - b * b;
+    if !(det.is_finite() && det > 0.0) {
+        return Information::ZERO;
+    }
+    let inv = [[d / det, -b / det], [-b / det, a / det]];
+    let mut s = [[0.0f64; 4]; 4];
+    for i in 0..4 {
+        for j in 0..4 {
+            let mut x = h[i][j];
+            for k in 0..2 {
+                for l in 0..2 {
+                    x -= h[i][4 + k] * inv[k][l] * h[4 + l][j];
+                }
+            }
+            s[i][j] = x;
+        }
+    }
+    let n = pass.corr.n.max(1.0);
+    let variance = pass.sse / n;
+    if !fit_t {
+        // Only the flow at the edges' mean inverse depth ā was fitted: the c block's
+        // information, moved onto the direction (ā, 1) of each axis.
+        let (mut sw, mut sa) = (0.0f64, 0.0f64);
+        for (&t, &a) in level.t.iter().zip(&level.inv_depth) {
+            if a > 0.0 {
+                sw += t as f64;
+                sa += (t * a) as f64;
+            }
+        }
+        let abar = if sw > 0.0 { sa / sw } else { 0.0 };
+        let w = [abar, abar, 1.0, 1.0];
+        let idx = [2usize, 3, 2, 3];
+        let mut m = [[0.0f64; 4]; 4];
+        for i in 0..4 {
+            for j in 0..4 {
+                m[i][j] = w[i] * w[j] * s[idx[i]][idx[j]];
+            }
+        }
+        s = m;
+    }
+    Information::from_normal_matrix(s, variance, EDGE_PIXELS_PER_SAMPLE)
 }
 
 /// `(t_x, t_y, c_x, c_y, α, β)`.

@@ -16,11 +16,22 @@
 //!    range is held back. If `jump_confirmations` consecutive held-back measurements agree
 //!    with each other, the calibration really jumped (an OIS step, a knock): they replace the
 //!    history. One wild frame is therefore never enough.
-//! 3. *Running median*: the estimate is the per-parameter median of the last `window` accepted
+//! 3. *Observability* (issue 32): a measurement that says how well its frame constrains each
+//!    direction of `(t, c)` ([`Measurement::information`], [`crate::online::observability`])
+//!    moves the estimate only along the directions it knows to `max_direction_std_px`: it is
+//!    replaced by `e + P (m − e)`, `e` the estimate and `P` the projector onto those
+//!    eigenvectors of its information, before the gate and the median see it. A measurement
+//!    that constrains no direction is [`Outcome::Unobservable`] and leaves the estimate where it
+//!    is (it counts towards the warm-up, so a featureless room does not run the network on
+//!    every frame, but it is neither accepted nor a rejection). Without an estimate there is
+//!    nothing to project onto, so an estimator without a prior takes its first measurement
+//!    whole; [`OnlineCalibrator::with_prior`] starts from a known (factory) calibration that
+//!    the unconstrained directions keep.
+//! 4. *Running median*: the estimate is the per-parameter median of the last `window` accepted
 //!    measurements — bounded influence for anything the gate lets through, and a lag of about
 //!    `window / 2` measurements on a drift.
 //!
-//! 4. *Principal-point tracking*: on frames without the network, the edge check's shift (the
+//! 5. *Principal-point tracking*: on frames without the network, the edge check's shift (the
 //!    correction of `c` that best lines up RGB and warped-amplitude edges) moves the estimate's
 //!    `c` by `track_gain` of it, at most `track_max_step_px` per frame, when its correlation
 //!    peak is clear (`track_min_ncc`). The accepted measurements move with it: they are
@@ -43,12 +54,20 @@
 //! (`retry_frames`) after a rejected measurement, and when the alignment residual has exceeded
 //! the value measured on the last network frame by `residual_trigger_ratio` for
 //! `residual_trigger_frames` consecutive frames.
+//!
+//! **Health** ([`OnlineCalibrator::health`], issue 32 item 3): good / can improve / needs
+//! recalibration, from the correction the latest evidence proposes, the estimate's own
+//! uncertainty and the held-back measurements; see [`CalibrationHealth`] and
+//! docs/calibration-health.md.
 
 use std::collections::VecDeque;
+
+use dear_proto::CalibrationHealth;
 
 use crate::calibration::Calibration;
 use crate::geometry::LsqError;
 use crate::online::measurement::{Evidence, Measurement};
+use crate::online::observability::{Information, Observability};
 use crate::online::residual::EdgeAlignment;
 
 /// Settings of [`OnlineCalibrator`].
@@ -90,12 +109,27 @@ pub struct OnlineConfig {
     pub track_min_ncc: f32,
     /// Largest change of `c` per frame from tracking, px.
     pub track_max_step_px: f32,
+    /// A measurement moves the estimate only along the directions of `(t, c)` it knows to at
+    /// most this standard deviation (px of flow at about 1 m; eigenvalue of its information
+    /// `≥ 1/σ²`). `f32::INFINITY` turns the projection off.
+    pub max_direction_std_px: f32,
+    /// The prior's ([`OnlineCalibrator::with_prior`]) standard deviation in every direction,
+    /// px: how far a factory calibration is trusted before any frame confirmed it.
+    pub prior_std_px: f32,
+    /// Health: a proposed correction or an uncertainty of the estimate up to this many px of
+    /// flow is "good".
+    pub health_good_px: f32,
+    /// Health: a proposed correction of at least this many px (or a held-back measurement
+    /// beyond the gate) is "needs recalibration".
+    pub health_recalibrate_px: f32,
 }
 
 impl Default for OnlineConfig {
     /// Every 30 frames (1 s at 30 fps; drift is far slower), median of 5, gate 3 px over
     /// 0.3–5 m, jumps confirmed by 3 measurements, residual trigger +25 % for 3 frames;
-    /// `c` tracked between network frames with gain 0.7, peaks with NCC ≥ 0.1, ≤ 1 px/frame.
+    /// `c` tracked between network frames with gain 0.7, peaks with NCC ≥ 0.1, ≤ 1 px/frame;
+    /// measurements applied along directions known to ≤ 0.5 px; a prior known to 0.5 px;
+    /// health good up to 1 px, needs recalibration from 3 px (the gate).
     fn default() -> Self {
         OnlineConfig {
             interval_frames: 30,
@@ -115,6 +149,10 @@ impl Default for OnlineConfig {
             track_gain: 0.7,
             track_min_ncc: 0.1,
             track_max_step_px: 1.0,
+            max_direction_std_px: 0.5,
+            prior_std_px: 0.5,
+            health_good_px: 1.0,
+            health_recalibrate_px: 3.0,
         }
     }
 }
@@ -165,6 +203,9 @@ pub enum Outcome {
     Jump,
     /// Not admissible.
     Rejected(Rejection),
+    /// Admissible, but its frame constrains no direction of `(t, c)` well enough
+    /// (`max_direction_std_px`): the estimate is left alone.
+    Unobservable,
 }
 
 /// Why a measurement was not admissible.
@@ -205,6 +246,12 @@ pub struct OnlineCalibrator {
     tracked: (f32, f32),
     /// A delivered measurement was accepted: take the next frame's residual as the baseline.
     baseline_due: bool,
+    /// The prior's information (`with_prior`), if any.
+    prior: Option<Information>,
+    /// Unobservable measurements so far (they count towards the warm-up), capped.
+    unobservable: usize,
+    /// What the last admitted measurement constrained.
+    last_observability: Option<Observability>,
 }
 
 impl OnlineCalibrator {
@@ -234,7 +281,21 @@ impl OnlineCalibrator {
             this_frame_network: false,
             tracked: (0.0, 0.0),
             baseline_due: false,
+            prior: None,
+            unobservable: 0,
+            last_observability: None,
         }
+    }
+
+    /// An estimator that starts from a known calibration (the factory one), trusted to
+    /// `prior_std_px` in every direction: the network still warms up, but measurements move
+    /// it only along the directions their frames constrain, so a featureless scene leaves it
+    /// where it is.
+    pub fn with_prior(config: OnlineConfig, prior: Calibration) -> Self {
+        let mut est = OnlineCalibrator::new(config);
+        est.estimate = Some(prior);
+        est.prior = Some(Information::isotropic(est.config.prior_std_px));
+        est
     }
 
     /// The settings in use.
@@ -246,7 +307,7 @@ impl OnlineCalibrator {
     pub fn begin_frame(&mut self) -> FrameDecision {
         self.frame += 1;
         let since = self.last_network_frame.map(|f| self.frame - f);
-        let reason = if self.accepted.len() < self.config.warmup_measurements {
+        let reason = if self.accepted.len() + self.unobservable < self.config.warmup_measurements {
             Some(Trigger::Warmup)
         } else if self.last_rejected
             && since.is_none_or(|s| s >= u64::from(self.config.retry_frames))
@@ -421,15 +482,45 @@ impl OnlineCalibrator {
             Err(_) => Outcome::Rejected(Rejection::FitFailed),
             Ok(m) => match self.admit(&m) {
                 Err(why) => Outcome::Rejected(why),
-                Ok(()) => self.gate(m),
+                Ok(()) => match self.project(m) {
+                    None => Outcome::Unobservable,
+                    Some(m) => self.gate(m),
+                },
             },
         };
-        self.record(outcome);
+        if outcome == Outcome::Unobservable {
+            // Neither accepted nor rejected: no retry, the acceptance is unchanged.
+            self.last_rejected = false;
+            self.unobservable = (self.unobservable + 1).min(self.config.warmup_measurements);
+        } else {
+            self.record(outcome);
+        }
         if matches!(outcome, Outcome::Accepted | Outcome::Jump) {
             self.estimate = Some(median(&self.accepted));
             self.last_estimate_frame = Some(self.frame);
         }
         outcome
+    }
+
+    /// The measurement moved from the estimate only along the directions its frame
+    /// constrains (unchanged without an estimate or without information); `None` when it
+    /// constrains none.
+    fn project(&mut self, mut m: Measurement) -> Option<Measurement> {
+        let Some(info) = m.information else {
+            self.last_observability = None;
+            return Some(m);
+        };
+        let obs = info.observability(self.config.max_direction_std_px);
+        self.last_observability = Some(obs);
+        if obs.constrained == 0 {
+            return None;
+        }
+        if let Some(e) = self.estimate {
+            if !obs.complete() {
+                m.calibration = obs.step(&e, &m.calibration);
+            }
+        }
+        Some(m)
     }
 
     /// Counts a network attempt's outcome: the acceptance window and the retry trigger.
@@ -556,6 +647,80 @@ impl OnlineCalibrator {
         (fit * acceptance * freshness).clamp(0.0, 1.0)
     }
 
+    /// What the last admitted measurement's frame constrained (`None` before any, or when it
+    /// carried no information).
+    pub fn last_observability(&self) -> Option<Observability> {
+        self.last_observability
+    }
+
+    /// The information behind the estimate: the prior's plus that of every measurement in the
+    /// window (a measurement without information counts as knowing every direction to
+    /// 0.1 px). A heuristic for "has every direction been seen": the measurements of one
+    /// scene are not independent, and the estimate is their median, not their weighted mean.
+    pub fn information(&self) -> Information {
+        let mut info = self.prior.unwrap_or(Information::ZERO);
+        for m in &self.accepted {
+            info = info.add(&m.information.unwrap_or(Information::isotropic(0.1)));
+        }
+        info
+    }
+
+    /// The calibration's health (docs/calibration-health.md):
+    /// - **unknown** without an estimate;
+    /// - **needs recalibration** while `≥ 2` mutually consistent measurements beyond the gate
+    ///   are held back (a jump half confirmed; one wild frame is never enough), or when the
+    ///   recent evidence proposes a correction of `health_recalibrate_px` or more;
+    /// - **can improve** when it proposes `health_good_px` or more, when some direction of the
+    ///   estimate is known only to worse than `health_good_px` (no prior and no frame
+    ///   constrained it yet), or while the alignment residual is above its trigger level;
+    /// - **good** otherwise.
+    ///
+    /// The *proposed correction* is the flow distance from the estimate to the per-parameter
+    /// median of the last three accepted (projected) measurements: what the recent evidence
+    /// says, robust to one wild measurement as the estimate is, and ahead of the estimate
+    /// (the median of the whole window) when the calibration moves.
+    pub fn health(&self) -> HealthReport {
+        let info = self.information();
+        let uncertainty_px = info.observability(self.config.health_good_px).worst_std_px;
+        let recent: VecDeque<Measurement> = self
+            .accepted
+            .iter()
+            .skip(self.accepted.len().saturating_sub(RECENT_MEASUREMENTS))
+            .copied()
+            .collect();
+        let proposed_px = match (self.estimate, recent.is_empty()) {
+            (Some(e), false) => self.flow_distance(&e, &median(&recent)),
+            _ => 0.0,
+        };
+        let held_back_px = match (self.estimate, self.pending.last()) {
+            (Some(e), Some(p)) if self.pending.len() >= 2 => {
+                Some(self.flow_distance(&e, &p.calibration))
+            }
+            _ => None,
+        };
+        let correction_px = proposed_px.max(held_back_px.unwrap_or(0.0));
+        let state = if self.estimate.is_none() {
+            CalibrationHealth::Unknown
+        } else if held_back_px.is_some() || correction_px >= self.config.health_recalibrate_px {
+            CalibrationHealth::NeedsRecalibration
+        } else if correction_px >= self.config.health_good_px
+            || uncertainty_px.is_nan()
+            || uncertainty_px > self.config.health_good_px
+            || self.residual_high_frames >= self.config.residual_trigger_frames
+        {
+            CalibrationHealth::CanImprove
+        } else {
+            CalibrationHealth::Good
+        };
+        HealthReport {
+            state,
+            correction_px,
+            uncertainty_px,
+            constrained: self.last_observability.map_or(4, |o| o.constrained),
+            held_back: self.pending.len(),
+        }
+    }
+
     /// Frames since the estimate last changed (0 on the frame it changed), `None` before any.
     pub fn frames_since_estimate(&self) -> Option<u64> {
         self.last_estimate_frame.map(|f| self.frame - f)
@@ -570,6 +735,29 @@ impl OnlineCalibrator {
     pub fn frames(&self) -> u64 {
         self.frame
     }
+}
+
+/// Accepted measurements whose median is the "recent evidence" of [`OnlineCalibrator::health`].
+const RECENT_MEASUREMENTS: usize = 3;
+
+/// [`OnlineCalibrator::health`]'s state and the numbers behind it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HealthReport {
+    /// Good / can improve / needs recalibration (unknown without an estimate).
+    pub state: CalibrationHealth,
+    /// The larger of the correction the recent evidence proposes (the median of the last
+    /// three accepted measurements against the estimate) and, with two or more held back, the
+    /// last held-back measurement's distance from the estimate; px of flow over the depth
+    /// range.
+    pub correction_px: f32,
+    /// Standard deviation of the estimate along its worst-known direction, px (∞ when some
+    /// direction has never been constrained).
+    pub uncertainty_px: f32,
+    /// Directions the last admitted measurement's frame constrained, 0–4 (4 when it carried
+    /// no information, or before any).
+    pub constrained: u8,
+    /// Measurements held back by the gate, waiting for the confirmation of a jump.
+    pub held_back: usize,
 }
 
 /// Per-parameter median of the measurements (upper median for an even count,
@@ -604,6 +792,7 @@ mod tests {
     fn flow_fit(c: Calibration, rms_residual_px: f32, inlier_fraction: f32) -> Measurement {
         Measurement {
             calibration: c,
+            information: None,
             evidence: Evidence::Flow {
                 rms_residual_px,
                 inlier_fraction,
@@ -619,6 +808,7 @@ mod tests {
     fn edge_fit(c: Calibration, correlation: f32) -> Measurement {
         Measurement {
             calibration: c,
+            information: None,
             evidence: Evidence::Edges {
                 correlation,
                 initial_correlation: 0.1,
@@ -1139,5 +1329,206 @@ mod tests {
         assert_eq!(est.begin_frame().run_network, Some(Trigger::Residual));
         est.end_frame(Some(Ok(good(TRUE))), residual(0.4));
         assert_eq!(est.begin_frame().run_network, None);
+    }
+
+    /// A flow fit whose frame has edges at the inverse depths `layers` only (1000 samples
+    /// each, 0.1 px noise): one layer constrains `t/z + c` at its depth, two or more all four.
+    fn observed(c: Calibration, layers: &[f32]) -> Measurement {
+        let mut info = Information::ZERO;
+        for &a in layers {
+            let n = 1000.0;
+            let a = f64::from(a);
+            info = info.add(&Information::of_flow_fit(n, a * n, a * a * n, 0.01, 1.0));
+        }
+        Measurement {
+            information: Some(info),
+            ..good(c)
+        }
+    }
+
+    /// Issue 32: a frame that constrains only some directions moves the estimate only along
+    /// them. With edges at 2 m only (a wall), a measurement that got `t` and `c` wrong along
+    /// the direction that keeps the flow at 2 m (what a fit of a wall does) leaves a correct
+    /// calibration where it is, frame after frame; a frame with no information at all is
+    /// `Unobservable`, and neither retries the network nor counts against the acceptance.
+    #[test]
+    fn a_frame_that_cannot_improve_the_estimate_leaves_it_alone() {
+        let config = OnlineConfig {
+            interval_frames: 1,
+            ..OnlineConfig::default()
+        };
+        let mut est = OnlineCalibrator::with_prior(config, TRUE);
+        assert_eq!(est.estimate(), Some(TRUE));
+        // t off by +3 px·m, c by −1.5 px: the same flow at 2 m (a = 0.5), 3.8 px off at 0.3 m.
+        let wrong = Calibration {
+            tx: TRUE.tx + 3.0,
+            cx: TRUE.cx - 1.5,
+            ty: TRUE.ty - 2.0,
+            cy: TRUE.cy + 1.0,
+        };
+        for f in 0..20 {
+            assert!(est.begin_frame().run_network.is_some());
+            let outcome = est.end_frame(Some(Ok(observed(wrong, &[0.5]))), None);
+            assert_eq!(outcome, Some(Outcome::Accepted), "frame {f}");
+            assert_eq!(est.last_observability().unwrap().constrained, 2);
+            let e = est.estimate().unwrap();
+            assert!(dist(e, TRUE) < 1e-4, "frame {f}: {e:?}");
+        }
+        // The same measurement without observability moves it (the old behaviour).
+        let mut blind = OnlineCalibrator::with_prior(config, TRUE);
+        blind.begin_frame();
+        blind.end_frame(Some(Ok(good(wrong))), None);
+        assert!(dist(blind.estimate().unwrap(), TRUE) > 1.0);
+        // Nothing constrained at all: unobservable, no retry, acceptance unchanged.
+        let before = est.quality();
+        est.begin_frame();
+        let outcome = est.end_frame(Some(Ok(observed(wrong, &[]))), None);
+        assert_eq!(outcome, Some(Outcome::Unobservable));
+        assert!(dist(est.estimate().unwrap(), TRUE) < 1e-4);
+        assert_eq!(est.quality(), before);
+        assert_ne!(est.begin_frame().run_network, Some(Trigger::Retry));
+    }
+
+    /// The other half: frames that constrain every direction (edges at several depths) move a
+    /// wrong prior to the truth; frames that constrain only the flow at one depth correct
+    /// exactly that flow and leave the rest of the prior.
+    #[test]
+    fn constrained_frames_still_converge() {
+        let config = OnlineConfig {
+            interval_frames: 1,
+            ..OnlineConfig::default()
+        };
+        let off = Calibration {
+            tx: TRUE.tx - 4.0,
+            ty: TRUE.ty + 2.0,
+            cx: TRUE.cx + 2.0,
+            cy: TRUE.cy - 1.0,
+        };
+        let mut est = OnlineCalibrator::with_prior(config, off);
+        for _ in 0..3 {
+            est.begin_frame();
+            est.end_frame(Some(Ok(observed(TRUE, &[0.3, 0.6, 1.2]))), None);
+        }
+        assert!(dist(est.estimate().unwrap(), TRUE) < 1e-4);
+        // Edges at 2 m only: the flow at 2 m becomes the truth's, the flow elsewhere is
+        // neither the truth's nor the prior's.
+        let mut est = OnlineCalibrator::with_prior(config, off);
+        for _ in 0..5 {
+            est.begin_frame();
+            est.end_frame(Some(Ok(observed(TRUE, &[0.5]))), None);
+        }
+        let e = est.estimate().unwrap();
+        let flow = |c: Calibration, z: f32| c.flow_at(z).unwrap();
+        let at = |z: f32| {
+            let (p, q) = (flow(e, z), flow(TRUE, z));
+            (p.0 - q.0).hypot(p.1 - q.1)
+        };
+        assert!(at(2.0) < 1e-4, "{e:?}");
+        assert!(at(0.3) > 1.0, "{e:?}");
+    }
+
+    /// The health states (docs/calibration-health.md) on constructed measurements.
+    #[test]
+    fn health_states() {
+        let config = OnlineConfig {
+            interval_frames: 1,
+            ..OnlineConfig::default()
+        };
+        // No estimate: unknown.
+        let est = OnlineCalibrator::new(config);
+        assert_eq!(est.health().state, CalibrationHealth::Unknown);
+        // A prior confirmed by agreeing measurements: good.
+        let mut est = OnlineCalibrator::with_prior(config, TRUE);
+        assert_eq!(
+            est.health().state,
+            CalibrationHealth::Good,
+            "{:?}",
+            est.health()
+        );
+        for _ in 0..3 {
+            est.begin_frame();
+            est.end_frame(Some(Ok(observed(TRUE, &[0.3, 0.6, 1.2]))), None);
+        }
+        let h = est.health();
+        assert_eq!(h.state, CalibrationHealth::Good, "{h:?}");
+        assert!(h.correction_px < 1e-3 && h.uncertainty_px < 0.5, "{h:?}");
+        assert_eq!(h.constrained, 4);
+        // c_x moves by 1.5 px. The first measurement of it is outvoted (one wild frame is
+        // never enough); after the second the last three measurements say 1.5 px while the
+        // estimate, the median of five, has not moved yet: can improve; the third moves it.
+        let moved_cx = |d: f32| Calibration {
+            cx: TRUE.cx + d,
+            ..TRUE
+        };
+        let at = |d: f32| Some(Ok(observed(moved_cx(d), &[0.3, 0.6, 1.2])));
+        let mut states = Vec::new();
+        for _ in 0..3 {
+            est.begin_frame();
+            est.end_frame(at(1.5), None);
+            states.push(est.health());
+        }
+        assert_eq!(states[0].state, CalibrationHealth::Good, "{states:?}");
+        assert_eq!(states[1].state, CalibrationHealth::CanImprove, "{states:?}");
+        assert!((states[1].correction_px - 1.5).abs() < 1e-3, "{states:?}");
+        assert_eq!(states[2].state, CalibrationHealth::Good, "{states:?}");
+        assert!(dist(est.estimate().unwrap(), moved_cx(1.5)) < 1e-4);
+        // A jump of 5 px: the first measurement beyond the gate is held back and changes
+        // nothing; the second, consistent with it, says needs recalibration; the third
+        // confirms the jump, the estimate takes it, and the health is good again.
+        for k in 0..3 {
+            est.begin_frame();
+            let outcome = est.end_frame(at(6.5), None);
+            let h = est.health();
+            match k {
+                0 => {
+                    assert!(
+                        matches!(outcome, Some(Outcome::Gated { .. })),
+                        "{outcome:?}"
+                    );
+                    assert_eq!((h.state, h.held_back), (CalibrationHealth::Good, 1));
+                }
+                1 => {
+                    assert!(
+                        matches!(outcome, Some(Outcome::Gated { .. })),
+                        "{outcome:?}"
+                    );
+                    assert_eq!(h.state, CalibrationHealth::NeedsRecalibration, "{h:?}");
+                    assert!((h.correction_px - 5.0).abs() < 1e-3, "{h:?}");
+                }
+                _ => {
+                    assert_eq!(outcome, Some(Outcome::Jump));
+                    assert_eq!(h.state, CalibrationHealth::Good, "{h:?}");
+                }
+            }
+        }
+        // Without a prior, frames that constrain only two directions leave the estimate's
+        // other two unknown: can improve, however well the seen directions agree.
+        let mut est = OnlineCalibrator::new(config);
+        for _ in 0..3 {
+            est.begin_frame();
+            est.end_frame(Some(Ok(observed(TRUE, &[0.5]))), None);
+        }
+        let h = est.health();
+        assert_eq!(h.state, CalibrationHealth::CanImprove, "{h:?}");
+        assert!(h.uncertainty_px > 1.0, "{h:?}");
+        assert_eq!(h.constrained, 2);
+        // A growing alignment residual: can improve until the network re-measures.
+        let mut est = OnlineCalibrator::with_prior(
+            OnlineConfig {
+                interval_frames: 1000,
+                ..config
+            },
+            TRUE,
+        );
+        for _ in 0..3 {
+            est.begin_frame();
+            est.end_frame(Some(Ok(observed(TRUE, &[0.3, 0.6, 1.2]))), residual(0.4));
+        }
+        assert_eq!(est.health().state, CalibrationHealth::Good);
+        for _ in 0..3 {
+            est.begin_frame();
+            est.end_frame(None, residual(0.8));
+        }
+        assert_eq!(est.health().state, CalibrationHealth::CanImprove);
     }
 }

@@ -10,6 +10,7 @@ use crate::direct::DirectFit;
 use crate::frame::Flow;
 use crate::geometry::surface::is_valid_depth;
 use crate::geometry::{solve_calibration_robust, LsqError, RobustOptions};
+use crate::online::observability::{Information, Observability, FLOW_PIXELS_PER_SAMPLE};
 
 /// A calibration fit of one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -18,6 +19,10 @@ pub struct Measurement {
     pub calibration: Calibration,
     /// What the fit rests on, and how well it fits.
     pub evidence: Evidence,
+    /// How well the frame constrains each direction of `(t, c)`
+    /// ([`crate::online::observability`]); `None` when unknown, which the estimator treats as
+    /// constraining every direction.
+    pub information: Option<Information>,
 }
 
 /// What a [`Measurement`] was fitted to.
@@ -62,6 +67,7 @@ impl Measurement {
         let fit = solve_calibration_robust(flow, depth, None, robust)?;
         let c = fit.calibration;
         let (mut used, mut inliers, mut sum2) = (0usize, 0usize, 0.0f64);
+        let (mut sum_a, mut sum_a2) = (0.0f64, 0.0f64);
         Zip::from(&depth)
             .and(&flow.u)
             .and(&flow.v)
@@ -75,10 +81,29 @@ impl Measurement {
                 if r <= inlier_threshold_px {
                     inliers += 1;
                     sum2 += f64::from(r * r);
+                    let a = f64::from(1.0 / z);
+                    sum_a += a;
+                    sum_a2 += a * a;
                 }
             });
+        // The inliers' information, the residual variance per coordinate from their RMS end
+        // point error (at least 0.05 px: a flow the model explains exactly is still a network's).
+        let rms = if inliers > 0 {
+            (sum2 / inliers as f64).sqrt()
+        } else {
+            f64::INFINITY
+        };
+        let variance = 0.5 * rms.max(0.05).powi(2);
+        let information = Information::of_flow_fit(
+            inliers as f64,
+            sum_a,
+            sum_a2,
+            variance,
+            FLOW_PIXELS_PER_SAMPLE,
+        );
         Ok(Measurement {
             calibration: c,
+            information: Some(information),
             evidence: Evidence::Flow {
                 rms_residual_px: if inliers > 0 {
                     (sum2 / inliers as f64).sqrt() as f32
@@ -100,6 +125,7 @@ impl Measurement {
     pub fn from_direct_fit(fit: &DirectFit) -> Option<Measurement> {
         (!fit.fell_back).then_some(Measurement {
             calibration: fit.calibration,
+            information: Some(fit.information),
             evidence: Evidence::Edges {
                 correlation: fit.correlation,
                 initial_correlation: fit.initial_correlation,
@@ -124,6 +150,14 @@ impl Measurement {
         } else {
             q.clamp(0.0, 1.0)
         }
+    }
+
+    /// What the frame constrains at the threshold `max_std_px` (every direction when the
+    /// information is unknown).
+    pub fn observability(&self, max_std_px: f32) -> Observability {
+        self.information
+            .unwrap_or(Information::isotropic(0.0))
+            .observability(max_std_px)
     }
 
     /// The flow fit's inlier RMS end-point residual, px (`None` for an edge fit, which has no

@@ -6,6 +6,9 @@
 //! - [`estimator`]: [`OnlineCalibrator`], when to run the network and the robust filter over
 //!   time (admission, innovation gate with jump confirmation, running median), with a quality
 //!   figure;
+//! - [`observability`]: how well a frame constrains each direction of `(t, c)` (the fit's
+//!   information matrix and its eigen-decomposition), which the estimator projects each
+//!   measurement's step onto (issue 32; docs/calibration-health.md);
 //! - [`residual`]: a cheap per-frame alignment check (RGB vs warped-amplitude edges) that
 //!   triggers the network early when the alignment degrades, and measures the principal-point
 //!   correction the estimator tracks between network frames.
@@ -14,10 +17,13 @@
 
 pub mod estimator;
 pub mod measurement;
+pub mod observability;
 pub mod residual;
 
 pub use estimator::{
-    FrameDecision, NetworkTicket, OnlineCalibrator, OnlineConfig, Outcome, Rejection, Trigger,
+    FrameDecision, HealthReport, NetworkTicket, OnlineCalibrator, OnlineConfig, Outcome, Rejection,
+    Trigger,
 };
 pub use measurement::{Evidence, Measurement};
+pub use observability::{Eigen, Information, Observability};
 pub use residual::{EdgeAlignment, EdgeCheck, EdgeShift};
