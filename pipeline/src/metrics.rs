@@ -13,10 +13,11 @@
 //! - [`TemporalChange`]: mean frame-to-frame change of the depth on static surfaces (pixels
 //!   whose ground truth did not change), the flicker a sequence shows.
 //!
-//! `train/dear_train/evaluation.py` implements the first two definitions for the training side
-//! (`dear-evaluate`, a run's validation, `model.json`'s `validation`); both are checked against
-//! the hand-computed cases in `fixtures/metrics/` (`pipeline/tests/metrics_fixture.rs`,
-//! `train/tests/test_metrics_fixture.py`). Change the two together.
+//! `train/dear_train/metrics.py` mirrors the four definitions in Python (the first two serve
+//! the training side: `dear-evaluate`, a run's validation, `model.json`'s `validation`); both
+//! are checked against the hand-computed cases in `fixtures/metrics/`
+//! (`pipeline/tests/metrics_fixture.rs`, `train/tests/test_metrics_fixture.py`). Change the two
+//! together.
 
 use ndarray::{ArrayView2, Zip};
 

@@ -1,7 +1,8 @@
-//! `metrics::{DepthErrorSplit, aepe}` against the hand-computed cases in `fixtures/metrics/`
-//! (made by `make_metrics.py` beside them; `train/tests/test_metrics_fixture.py` checks the
-//! Python mirror in `train/dear_train/evaluation.py` against the same files, so both languages
-//! compute one definition).
+//! `metrics::{DepthErrorSplit, aepe, Reliability, TemporalChange}` against the hand-computed
+//! cases in `fixtures/metrics/` (made by `make_metrics.py` beside them;
+//! `train/tests/test_metrics_fixture.py` checks the Python mirror in
+//! `train/dear_train/metrics.py` against the same files, so both languages compute one
+//! definition).
 //!
 //! The depth case tells the definitions apart: ranking pooled over the set (checked below by
 //! stacking the frames into one), other quarter boundaries, other tie-breaking or counting an
@@ -9,7 +10,10 @@
 
 mod common;
 
-use dear_pipeline::metrics::{aepe, DepthErrorSplit, CLASSES, MAX_EVAL_DEPTH_M};
+use dear_pipeline::metrics::{
+    aepe, DepthErrorSplit, Reliability, TemporalChange, CLASSES, MAX_EVAL_DEPTH_M,
+    RELIABILITY_EDGES_CM, STATIC_TOLERANCE_M,
+};
 use dear_pipeline::Flow;
 use ndarray::{concatenate, Array2, Axis, Zip};
 use serde_json::Value;
@@ -186,4 +190,170 @@ fn aepe_matches_the_fixture() {
         want["mean_over_frames"].as_f64().unwrap(),
         "mean over frames",
     );
+}
+
+/// A float32 plane that may hold the non-finite strings `"NaN"`, `"inf"`, `"-inf"` (JSON has no
+/// such numbers; `reliability.json` and `temporal_change.json` write them so).
+fn f32s_nonfinite(v: &Value) -> Array2<f32> {
+    assert_eq!(v["dtype"], "f32");
+    let shape: Vec<usize> = u64s(&v["shape"]).iter().map(|&d| d as usize).collect();
+    let data = v["data"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| match x {
+            Value::String(s) => match s.as_str() {
+                "NaN" => f32::NAN,
+                "inf" => f32::INFINITY,
+                "-inf" => f32::NEG_INFINITY,
+                other => panic!("unexpected element {other:?}"),
+            },
+            _ => x
+                .as_f64()
+                .unwrap_or_else(|| panic!("unexpected element {x}")) as f32,
+        })
+        .collect();
+    plane((shape, data))
+}
+
+/// `plane` with the ground truth zeroed outside `valid`, as `evaluate::report` passes it.
+fn masked(gt: &Array2<f32>, valid: &Array2<bool>) -> Array2<f32> {
+    Zip::from(gt)
+        .and(valid)
+        .map_collect(|&g, &v| if v { g } else { 0.0 })
+}
+
+/// The reliability case: predictions either side of bin edges (scaling to cm in f32 would move
+/// the ones below up a bin), a zero prediction (in), non-finite predictions, invalid outputs and
+/// ground truth beyond range or outside the mask (out), two empty bins.
+#[test]
+fn reliability_matches_the_fixture() {
+    let doc = load("reliability");
+    let max_depth = doc["inputs"]["max_depth_m"].as_f64().unwrap() as f32;
+    assert_eq!(max_depth, MAX_EVAL_DEPTH_M);
+    let edges: Vec<f64> = doc["inputs"]["edges_cm"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_f64().unwrap())
+        .collect();
+    assert_eq!(edges, RELIABILITY_EDGES_CM.to_vec());
+    let mut rel = Reliability::default();
+    let mut non_finite = 0;
+    for f in doc["inputs"]["frames"].as_array().unwrap() {
+        let predicted = f32s_nonfinite(&f["predicted"]);
+        non_finite += predicted.iter().filter(|p| !p.is_finite()).count();
+        let gt = masked(&f32s_nonfinite(&f["gt"]), &bools(&f["valid"]));
+        rel.add_frame(
+            f32s_nonfinite(&f["output"]).view(),
+            predicted.view(),
+            gt.view(),
+            max_depth,
+        );
+    }
+    assert_eq!(non_finite, 3, "the NaN, inf and -inf predictions are read");
+    let want = &doc["outputs"];
+    assert_eq!(rel.counts.to_vec(), u64s(&want["counts"]), "counts");
+    for (name, got) in [
+        ("predicted_sums_m", &rel.predicted),
+        ("measured_sums_m", &rel.measured),
+    ] {
+        for (b, w) in want[name].as_array().unwrap().iter().enumerate() {
+            close(got[b], w.as_f64().unwrap(), &format!("{name}[{b}]"));
+        }
+    }
+    let bins = rel.bins();
+    let want_bins = want["bins"].as_array().unwrap();
+    assert_eq!(bins.len(), want_bins.len(), "non-empty bins");
+    for (got, w) in bins.iter().zip(want_bins) {
+        let what = format!("bin from {} cm", got.predicted_lo_cm);
+        assert_eq!(
+            got.predicted_lo_cm,
+            w["predicted_lo_cm"].as_f64().unwrap(),
+            "{what}"
+        );
+        assert_eq!(got.predicted_hi_cm, w["predicted_hi_cm"].as_f64(), "{what}");
+        assert_eq!(got.pixels, w["pixels"].as_u64().unwrap(), "{what}");
+        close(
+            got.mean_predicted_cm,
+            w["mean_predicted_cm"].as_f64().unwrap(),
+            &format!("{what}: mean predicted"),
+        );
+        close(
+            got.mean_measured_cm,
+            w["mean_measured_cm"].as_f64().unwrap(),
+            &format!("{what}: mean measured"),
+        );
+        // `eval.json` writes the bins with serde: the fixture's field names.
+        let json = serde_json::to_value(got).unwrap();
+        let mut keys: Vec<_> = json.as_object().unwrap().keys().collect();
+        let mut want_keys: Vec<_> = w.as_object().unwrap().keys().collect();
+        keys.sort();
+        want_keys.sort();
+        assert_eq!(keys, want_keys, "{what}: fields");
+    }
+}
+
+/// The temporal-change case: the static tolerance at exactly float32(1e-3) (in) and one float32
+/// step beyond (out), invalid depths or ground truth in either frame, the range cut-off, and
+/// two pairs of different sizes (the mean is pooled over pixels, not over pairs).
+#[test]
+fn temporal_change_matches_the_fixture() {
+    let doc = load("temporal_change");
+    let max_depth = doc["inputs"]["max_depth_m"].as_f64().unwrap() as f32;
+    assert_eq!(max_depth, MAX_EVAL_DEPTH_M);
+    assert_eq!(
+        doc["inputs"]["static_tolerance_m"].as_f64().unwrap() as f32,
+        STATIC_TOLERANCE_M
+    );
+    let frames: Vec<(Array2<f32>, Array2<f32>)> = doc["inputs"]["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| {
+            let gt = masked(&f32s_nonfinite(&f["gt"]), &bools(&f["valid"]));
+            (f32s_nonfinite(&f["depth"]), gt)
+        })
+        .collect();
+    let want = &doc["outputs"];
+    let mut total = TemporalChange::default();
+    assert_eq!(total.mean_cm(), None);
+    let mut pair_means = Vec::new();
+    for (i, (pair, w)) in frames
+        .windows(2)
+        .zip(want["per_pair"].as_array().unwrap())
+        .enumerate()
+    {
+        let (previous, current) = (&pair[0], &pair[1]);
+        let mut one = TemporalChange::default();
+        for t in [&mut one, &mut total] {
+            t.add_pair(
+                (previous.0.view(), previous.1.view()),
+                (current.0.view(), current.1.view()),
+                max_depth,
+            );
+        }
+        assert_eq!(one.count, w["count"].as_u64().unwrap(), "pair {i}: count");
+        close(
+            one.sum,
+            w["sum_m"].as_f64().unwrap(),
+            &format!("pair {i}: sum"),
+        );
+        pair_means.push(one.mean_cm().unwrap());
+    }
+    assert_eq!(pair_means.len(), 2);
+    assert_eq!(total.count, want["count"].as_u64().unwrap(), "count");
+    close(total.sum, want["sum_m"].as_f64().unwrap(), "sum");
+    close(
+        total.mean_cm().unwrap(),
+        want["mean_cm"].as_f64().unwrap(),
+        "mean_cm",
+    );
+    let mean_of_means = pair_means.iter().sum::<f64>() / pair_means.len() as f64;
+    close(
+        mean_of_means,
+        want["mean_of_pair_means_cm"].as_f64().unwrap(),
+        "mean of the pairs' means",
+    );
+    assert!((mean_of_means - total.mean_cm().unwrap()).abs() > 0.1);
 }

@@ -20,9 +20,23 @@ Depth protocol (DEAR §5, Tables 2 and 3), **ranked per frame**:
 
 AEPE: per frame, the mean end-point error over valid pixels (finite flows, ``|truth| < 1e9``);
 over a set, the mean of the per-frame values.
+
+Reliability of a predicted absolute error (:class:`Reliability`): evaluated pixels have valid
+ground truth in ``(0, 4 m]``, a valid output and a finite prediction (0 included); the
+prediction ``p`` (metres) goes to the bin ``[RELIABILITY_EDGES_CM[b − 1],
+RELIABILITY_EDGES_CM[b])`` (0 and open above at the ends) counted as the edges ``<= 100 · p``
+in float64, and the bins accumulate the predicted and the measured ``|output − gt|``.
+
+Temporal change (:class:`TemporalChange`): over consecutive frames, the mean ``|a − b|`` of the
+depth on static pixels: both ground truths valid, the previous one within range, ``|ga − gb| <=
+STATIC_TOLERANCE_M`` (float32), both depths valid.
+
+A valid depth is finite and ``> 0`` (``is_valid_depth``).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -139,3 +153,125 @@ def aepe(estimate: np.ndarray, truth: np.ndarray, valid: np.ndarray) -> float | 
         return None
     d = (e - t)[:, ok].astype(np.float64)
     return float(np.sqrt(d[0] ** 2 + d[1] ** 2).mean())
+
+
+def _valid_depth(z: np.ndarray) -> np.ndarray:
+    """``is_valid_depth``: finite and ``> 0`` (NaN fails the comparison)."""
+    return (z > 0) & np.isfinite(z)
+
+
+#: Upper edges (cm) of the bins of predicted error :class:`Reliability` reports; the last bin is
+#: open above (``metrics::RELIABILITY_EDGES_CM``).
+RELIABILITY_EDGES_CM = (0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0)
+_RELIABILITY_BINS = len(RELIABILITY_EDGES_CM) + 1
+
+
+@dataclass(frozen=True)
+class ReliabilityBin:
+    """One bin of a :class:`Reliability`: predictions in ``[predicted_lo_cm, predicted_hi_cm)``
+    (``metrics::ReliabilityBin``, a row of ``eval.json``'s reliability table)."""
+
+    predicted_lo_cm: float
+    #: ``None``: open above.
+    predicted_hi_cm: float | None
+    pixels: int
+    mean_predicted_cm: float
+    mean_measured_cm: float
+
+
+class Reliability:
+    """Predicted against measured absolute depth error, accumulated over frames per bin of the
+    prediction (``metrics::Reliability``)."""
+
+    def __init__(self) -> None:
+        #: Pixels per bin.
+        self.counts = [0] * _RELIABILITY_BINS
+        #: Sums of the predicted errors per bin, metres.
+        self.predicted = [0.0] * _RELIABILITY_BINS
+        #: Sums of ``|output − gt|`` per bin, metres.
+        self.measured = [0.0] * _RELIABILITY_BINS
+
+    def add_frame(
+        self,
+        output: np.ndarray,
+        predicted: np.ndarray,
+        gt: np.ndarray,
+        valid: np.ndarray | None = None,
+        max_depth: float = MAE_RANGE_M,
+    ) -> None:
+        """Adds one ``(H, W)`` frame: ``predicted`` is each pixel's predicted absolute error in
+        metres; ``valid`` the ground-truth mask (as zeroing the ground truth outside it).
+        Evaluated pixels: ground truth valid and ``<= max_depth``, output valid, prediction
+        finite."""
+        o = np.asarray(output, dtype=np.float32)
+        p = np.asarray(predicted, dtype=np.float32)
+        g = np.asarray(gt, dtype=np.float32)
+        sel = _valid_depth(g) & (g <= np.float32(max_depth)) & _valid_depth(o) & np.isfinite(p)
+        if valid is not None:
+            sel &= np.asarray(valid, dtype=bool)
+        p64 = p[sel].astype(np.float64)
+        # The number of edges <= the prediction in cm; 100 · p is exact in float64 (never
+        # scaled in float32, which rounds the float32 just below an edge onto it).
+        bins = np.searchsorted(np.asarray(RELIABILITY_EDGES_CM), 100.0 * p64, side="right")
+        measured = np.abs(o[sel] - g[sel]).astype(np.float64)
+        counts = np.bincount(bins, minlength=_RELIABILITY_BINS)
+        pred_sums = np.bincount(bins, weights=p64, minlength=_RELIABILITY_BINS)
+        meas_sums = np.bincount(bins, weights=measured, minlength=_RELIABILITY_BINS)
+        for b in range(_RELIABILITY_BINS):
+            self.counts[b] += int(counts[b])
+            self.predicted[b] += float(pred_sums[b])
+            self.measured[b] += float(meas_sums[b])
+
+    def bins(self) -> list[ReliabilityBin]:
+        """The bins that hold pixels, from the smallest prediction up."""
+        edges = (0.0, *RELIABILITY_EDGES_CM, None)
+        return [
+            ReliabilityBin(
+                predicted_lo_cm=float(edges[b]),
+                predicted_hi_cm=edges[b + 1],
+                pixels=n,
+                mean_predicted_cm=100.0 * self.predicted[b] / n,
+                mean_measured_cm=100.0 * self.measured[b] / n,
+            )
+            for b, n in enumerate(self.counts)
+            if n > 0
+        ]
+
+
+#: Ground truths closer than this (metres) count as the same static surface; compared in
+#: float32, so the bound is ``float32(1e-3)`` = 0.0010000000475 m (``metrics::STATIC_TOLERANCE_M``).
+STATIC_TOLERANCE_M = np.float32(1e-3)
+
+
+class TemporalChange:
+    """Mean absolute change of the depth between consecutive frames over *static* pixels
+    (``metrics::TemporalChange``): on a still scene, pure flicker."""
+
+    def __init__(self) -> None:
+        #: Sum of ``|a − b|`` over the counted pixels, metres.
+        self.sum = 0.0
+        #: Pixels counted.
+        self.count = 0
+
+    def add_pair(
+        self,
+        previous: tuple[np.ndarray, np.ndarray],
+        current: tuple[np.ndarray, np.ndarray],
+        max_depth: float = MAE_RANGE_M,
+    ) -> None:
+        """Adds the pair of consecutive frames, each ``(depth, gt)`` in metres (ground truth
+        zeroed outside its mask). A pixel counts when both ground truths are valid, the
+        previous one is ``<= max_depth``, they differ by at most :data:`STATIC_TOLERANCE_M`
+        (float32) and both depths are valid."""
+        a, ga = (np.asarray(x, dtype=np.float32) for x in previous)
+        b, gb = (np.asarray(x, dtype=np.float32) for x in current)
+        sel = _valid_depth(ga) & _valid_depth(gb) & (ga <= np.float32(max_depth))
+        sel &= _valid_depth(a) & _valid_depth(b)
+        a, ga, b, gb = a[sel], ga[sel], b[sel], gb[sel]  # finite: no warnings below
+        still = np.abs(ga - gb) <= STATIC_TOLERANCE_M
+        self.sum += float(np.abs(a[still] - b[still]).astype(np.float64).sum())
+        self.count += int(still.sum())
+
+    def mean_cm(self) -> float | None:
+        """The mean change in centimetres; ``None`` before any static pixel."""
+        return 100.0 * self.sum / self.count if self.count else None

@@ -3,12 +3,16 @@
 ``pipeline/tests/metrics_fixture.rs`` checks ``pipeline/src/metrics.rs`` against the same files,
 so both languages compute one definition (per-frame ranking, see
 :mod:`dear_train.evaluation`). The depth case is built so that ranking pooled over the set,
-other quarter boundaries, other tie-breaking or counting invalid outputs all fail it
-(``fixtures/metrics/make_metrics.py``).
+other quarter boundaries, other tie-breaking or counting invalid outputs all fail it; the
+reliability case so that scaling predictions in float32, dropping a zero prediction or keeping a
+non-finite one, an invalid output or ground truth beyond range fail it; the temporal case so
+that ``<`` for ``<=`` or a float64 tolerance, another tolerance, invalid depths or the mean of
+the pairs' means fail it (``fixtures/metrics/make_metrics.py``).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import types
 from collections.abc import Callable
@@ -22,7 +26,12 @@ from dear_train.evaluation import AepeAccumulator, DepthAccumulator
 from dear_train.metrics import (
     CLASSES,
     MAE_RANGE_M,
+    RELIABILITY_EDGES_CM,
+    STATIC_TOLERANCE_M,
     DepthErrorSplit,
+    Reliability,
+    ReliabilityBin,
+    TemporalChange,
     aepe,
     depth_error_classes,
 )
@@ -34,8 +43,10 @@ TOL = 1e-9
 
 
 def arr(spec: dict) -> np.ndarray:
+    """An array of the fixture; non-finite values are the strings ``NaN``, ``inf``, ``-inf``."""
     dtype = {"f32": np.float32, "bool": np.bool_}[spec["dtype"]]
-    return np.array(spec["data"], dtype=np.float64).astype(dtype).reshape(spec["shape"])
+    data = [float(x) for x in spec["data"]]
+    return np.array(data, dtype=np.float64).astype(dtype).reshape(spec["shape"])
 
 
 def load(name: str) -> dict:
@@ -148,9 +159,102 @@ def test_aepe_matches_the_fixture() -> None:
     assert batched.result() == pytest.approx(want["mean_over_frames"], abs=1e-9)
 
 
+def test_reliability_matches_the_fixture() -> None:
+    doc = load("reliability")
+    assert doc["inputs"]["max_depth_m"] == MAE_RANGE_M
+    assert tuple(doc["inputs"]["edges_cm"]) == RELIABILITY_EDGES_CM
+    fs = frames(doc)
+    assert any(np.isnan(f["predicted"]).any() for f in fs)  # the non-finite cases are read
+    want = doc["outputs"]
+    rel = Reliability()
+    for f in fs:
+        rel.add_frame(
+            f["output"], f["predicted"], f["gt"], f["valid"], doc["inputs"]["max_depth_m"]
+        )
+    assert rel.counts == want["counts"]
+    np.testing.assert_allclose(rel.predicted, want["predicted_sums_m"], rtol=0, atol=TOL)
+    np.testing.assert_allclose(rel.measured, want["measured_sums_m"], rtol=0, atol=TOL)
+    got = rel.bins()
+    assert [(b.predicted_lo_cm, b.predicted_hi_cm, b.pixels) for b in got] == [
+        (w["predicted_lo_cm"], w["predicted_hi_cm"], w["pixels"]) for w in want["bins"]
+    ]
+    for b, w in zip(got, want["bins"], strict=True):
+        assert b.mean_predicted_cm == pytest.approx(w["mean_predicted_cm"], abs=TOL)
+        assert b.mean_measured_cm == pytest.approx(w["mean_measured_cm"], abs=TOL)
+    assert isinstance(got[0], ReliabilityBin)
+    assert set(dataclasses.asdict(got[0])) == set(want["bins"][0])  # eval.json's field names
+
+
+def test_reliability_masks_like_zeroed_ground_truth() -> None:
+    """``dear eval`` zeroes the ground truth outside its mask instead of passing one."""
+    doc = load("reliability")
+    rel = Reliability()
+    for f in frames(doc):
+        rel.add_frame(f["output"], f["predicted"], np.where(f["valid"], f["gt"], 0))
+    assert rel.counts == doc["outputs"]["counts"]
+
+
+def test_reliability_in_float32_would_fail_the_fixture() -> None:
+    """The predictions just below an edge: scaled to cm in float32 they round onto the edge and
+    move up a bin."""
+    doc = load("reliability")
+    fs = frames(doc)
+    counts = np.zeros(len(RELIABILITY_EDGES_CM) + 1, dtype=np.int64)
+    for f in fs:
+        g, o, p = f["gt"], f["output"], f["predicted"]
+        sel = f["valid"] & (g > 0) & (g <= MAE_RANGE_M) & (o > 0) & np.isfinite(o) & np.isfinite(p)
+        cm32 = np.float32(100) * p[sel]
+        assert cm32.dtype == np.float32
+        edges = np.asarray(RELIABILITY_EDGES_CM, dtype=np.float32)
+        counts += np.bincount(np.searchsorted(edges, cm32, side="right"), minlength=counts.size)
+    assert counts.tolist() != doc["outputs"]["counts"]
+
+
+def test_empty_reliability() -> None:
+    rel = Reliability()
+    rel.add_frame(np.ones((2, 2)), np.full((2, 2), np.nan), np.ones((2, 2)))
+    assert rel.bins() == [] and sum(rel.counts) == 0
+
+
+def test_temporal_change_matches_the_fixture() -> None:
+    doc = load("temporal_change")
+    assert doc["inputs"]["max_depth_m"] == MAE_RANGE_M
+    assert np.float32(doc["inputs"]["static_tolerance_m"]) == STATIC_TOLERANCE_M
+    fs = [(f["depth"], np.where(f["valid"], f["gt"], np.float32(0))) for f in frames(doc)]
+    want = doc["outputs"]
+    total = TemporalChange()
+    assert total.mean_cm() is None
+    pair_means = []
+    for prev, cur, w in zip(fs[:-1], fs[1:], want["per_pair"], strict=True):
+        one = TemporalChange()
+        one.add_pair(prev, cur, doc["inputs"]["max_depth_m"])
+        assert one.count == w["count"]
+        assert one.sum == pytest.approx(w["sum_m"], abs=TOL)
+        pair_means.append(one.mean_cm())
+        total.add_pair(prev, cur)
+    assert total.count == want["count"]
+    assert total.sum == pytest.approx(want["sum_m"], abs=TOL)
+    assert total.mean_cm() == pytest.approx(want["mean_cm"], abs=TOL)
+    assert sum(pair_means) / 2 == pytest.approx(want["mean_of_pair_means_cm"], abs=TOL)
+    assert abs(want["mean_of_pair_means_cm"] - want["mean_cm"]) > 0.1
+
+
+def test_temporal_tolerance_in_float64_would_fail_the_fixture() -> None:
+    """The ground truths 1 mm and 2 mm apart differ by exactly float32(1e-3), above 1e-3."""
+    doc = load("temporal_change")
+    f0, f1 = frames(doc)[:2]
+    diff = np.abs(f0["gt"] - f1["gt"])
+    assert (diff == STATIC_TOLERANCE_M).any()
+    assert (diff.astype(np.float64) <= 1e-3).sum() < (diff <= STATIC_TOLERANCE_M).sum()
+
+
 def test_committed_fixture_is_what_the_generator_writes(
     fixture_maker: Callable[[Path], types.ModuleType],
 ) -> None:
     make = fixture_maker(FIXTURE / "make_metrics.py")
     assert load("depth_error_split") == json.loads(json.dumps(make.depth_doc()))
     assert load("aepe") == json.loads(json.dumps(make.aepe_doc()))
+    assert load("reliability") == json.loads(json.dumps(make.reliability_doc()))
+    assert load("temporal_change") == json.loads(json.dumps(make.temporal_doc()))
+    assert make.RELIABILITY_EDGES_CM == RELIABILITY_EDGES_CM
+    assert np.float32(make.STATIC_TOLERANCE_M) == STATIC_TOLERANCE_M
