@@ -642,7 +642,7 @@ impl Corr {
     }
 }
 
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn correlation_at(level: &Level, theta: &Theta) -> Option<f64> {
     let mut c = Corr::default();
     for y in 0..level.tof_h {
@@ -723,7 +723,7 @@ fn parabola(m: f64, c: f64, p: f64) -> f64 {
 /// Returns the starting points for Gauss–Newton: the best local maxima of the global score,
 /// and the robust line `flow = t·(1/z) + c` through the layers' best offsets (which finds `t`
 /// where the global search, `t` held, cannot: near objects move far from the rest).
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn search_offsets(level: &Level, initial: &Theta, params: &DirectFitParams) -> Vec<Theta> {
     const LAYERS: usize = 6;
     let r = (params.search_radius_px / level.scale).round().max(0.0) as i32;
@@ -944,7 +944,7 @@ struct Pass {
 #[allow(clippy::needless_range_loop)]
 // Compiled for wider register files too: the 27 running sums of a pixel spill on the baseline
 // x86-64 target's 16 registers (no FMA contraction happens, so every version gives the same bits).
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn normal_equations(level: &Level, theta: &Theta, k_robust: f32) -> Pass {
     let mut corr = Corr::default();
     let mut hm = [[0.0f64; 6]; 6];

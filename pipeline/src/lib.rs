@@ -13,7 +13,8 @@
 //! - [`filter`]: the classical edge-aware refinement baseline;
 //! - [`model`]: model bundles (ONNX graphs + manifest) run by tract (feature `inference`);
 //! - [`dear`]: the paper's per-frame chain of networks and geometry (feature `inference`);
-//! - [`online`]: online re-estimation of the drifting calibration.
+//! - [`online`]: online re-estimation of the drifting calibration;
+//! - [`simd`]: the instruction sets the hot loops are compiled for, and which one runs.
 
 pub mod align;
 #[cfg(feature = "inference")]
@@ -28,6 +29,7 @@ pub mod metrics;
 #[cfg(feature = "inference")]
 pub mod model;
 pub mod online;
+pub mod simd;
 mod vector_math;
 
 // The capture format and the frame and calibration types it reads are the `dear-capture`

@@ -218,7 +218,7 @@ fn on_surface(z: f32, tol: f32, q: f32) -> u32 {
 /// the rows above and below: every neighbour exists. Written over equal-length shifted slices
 /// so that the loop has no bounds checks and vectorises; an invalid centre gets a count that
 /// [`confidence_row`] does not use.
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl", "x86_64+avx2"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn interior_support(above: &[f32], centre: &[f32], below: &[f32], out: &mut [u8]) {
     let n = out.len();
     let [a0, a1, a2, c0, c1, c2, b0, b1, b2] = window3x3([above, centre, below]).map(|s| &s[..n]);

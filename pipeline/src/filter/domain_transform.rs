@@ -367,7 +367,7 @@ fn horizontal_pass(
 /// One group of [`GROUP_ROWS`] rows of [`horizontal_pass`]: into tiles, both directions of the
 /// recursion, back into rows. Compiled for AVX-512 and AVX2 as well (a tile step is then one or
 /// two vectors instead of four), chosen at run time.
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn filter_group(
     num: &mut [f32],
     den: &mut [f32],
@@ -401,7 +401,7 @@ fn filter_group(
 
 /// One step of the vertical recursion on a row segment: `cur += a · (prev − cur)`, for both
 /// signals. Compiled for AVX-512 and AVX2 as well, chosen at run time.
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn recurse_row(n: &mut [f32], m: &mut [f32], a: &[f32], prev_n: &[f32], prev_m: &[f32]) {
     let len = n.len();
     let (m, a, prev_n, prev_m) = (&mut m[..len], &a[..len], &prev_n[..len], &prev_m[..len]);

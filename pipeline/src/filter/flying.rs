@@ -87,7 +87,7 @@ fn mixed(z: f32, tol: f32, a: f32, b: f32) -> bool {
 /// neighbour slices (row-major: up-left … down-right), `out` the row's interior. Branch-free
 /// (on noisy depth the "between" test is a coin flip); compiled for AVX-512 and AVX2 as well,
 /// chosen at run time.
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn interior_row(window: [&[f32]; 9], (rel, abs_m): (f32, f32), out: &mut [f32]) {
     let n = out.len();
     let [ul, uc, ur, cl, cc, cr, dl, dc, dr] = window.map(|s| &s[..n]);

@@ -317,7 +317,7 @@ impl ClassicalRefiner {
 /// `[flying_snapped, outlier_replaced]` flags). Written with selects (every pixel computes
 /// every case; validity and the flags pick one) so that the loop vectorises, as holes make the
 /// branches unpredictable; compiled for AVX-512 and AVX2 as well, chosen at run time.
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl", "x86_64+avx2"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn output_row(
     [filled, surfaced, measured]: [&[f32]; 3],
     fill_confidence: &[u8],

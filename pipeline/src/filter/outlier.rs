@@ -127,7 +127,7 @@ pub fn reject_outliers(
 /// holds the nine shifted neighbour slices, `out` and `replaced` the row's interior. Compiled
 /// for AVX-512 and AVX2 as well (sixteen or eight pixels' sorting networks side by side), chosen
 /// at run time.
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn interior_row(window: [&[f32]; 9], out: &mut [f32], replaced: &mut [bool]) {
     let n = out.len();
     let window = window.map(|s| &s[..n]);

@@ -52,7 +52,7 @@ pub fn snap_to_surface(
 
 /// One row `y` of [`snap_to_surface`] (`v` the values, `r` the reference, whole images).
 /// Compiled for AVX-512 and AVX2 as well, chosen at run time.
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn snap_row(
     (v, r): (&[f32], &[f32]),
     (h, w): (usize, usize),

@@ -146,7 +146,7 @@ fn gather(
 /// Weighted moments of the samples with the per-sample weight `weight_at(sample)`, centred in
 /// two passes (means first, then the covariances). The weights are computed once into `weights`
 /// (both passes read them; a Huber weight costs a division, a square root and the model's flow).
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn sample_moments(
     samples: &[Sample],
     weights: &mut Vec<f32>,

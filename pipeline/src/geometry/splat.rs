@@ -286,7 +286,7 @@ fn band_taps(
 /// rows (`(i32::MAX, i32::MIN)` without a cell). Written with selects, so that the run
 /// vectorises; compiled for AVX-512 and AVX2 as well, chosen
 /// at run time.
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn prepare_run(
     p: &Calibration,
     y: usize,

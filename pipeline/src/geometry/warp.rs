@@ -239,7 +239,7 @@ const FUSED_CHUNK: usize = 64;
 /// values loaded (the only scalar pass), then the blends. Sources of more than 2³² pixels, or
 /// wider or taller than 2²², go through the per-pixel functions.
 #[allow(clippy::too_many_arguments)]
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn fused_row(
     d: &[f32],
     a: &[f32],

@@ -341,7 +341,7 @@ struct GuardedLogits<'a> {
 
 /// One row of [`select_guarded`] (`out`: the refined row on entry), written with selects so
 /// that it vectorises.
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn guarded_row(
     out: &mut [f32],
     log_error: &mut [f32],
@@ -421,7 +421,7 @@ fn contiguous<'a>(row: &'a ndarray::ArrayView1<'_, f32>) -> std::borrow::Cow<'a,
 
 /// One row of [`blend_classical`], written with selects (every pixel computes the blend, the
 /// validity of `d` and `c` picks the result) so that it vectorises.
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn blend_row(out: &mut [f32], d_row: &[f32], c_row: &[f32], logits: &[f32], jump: f32) {
     for (((o, &d), &c), &logit) in out.iter_mut().zip(d_row).zip(c_row).zip(logits) {
         let t = sigmoid(logit + jump * (c - d).abs());
@@ -461,7 +461,7 @@ const TAIL_CHUNK: usize = 64;
 /// One output row, written as loops over the row's pixels (structure of arrays) so that the
 /// compiler vectorises them; `exp_fast` is branch-free for the same reason.
 #[allow(clippy::too_many_arguments)]
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl+fma", "x86_64+avx2+fma"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn gated_row(
     sc: &mut RowScratch,
     maps: &[CowArray<'_, f32, Ix2>],

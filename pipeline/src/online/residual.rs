@@ -291,7 +291,7 @@ impl EdgeCheck {
 
 /// Luma (`/255`) of one row of interleaved RGB. Compiled for AVX-512 and AVX2 as well,
 /// chosen at run time.
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl", "x86_64+avx2"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn luma_row(rgb: &[u8], luma: &mut [f32]) {
     for (l, p) in luma.iter_mut().zip(rgb.chunks_exact(3)) {
         *l = (0.299 * f32::from(p[0]) + 0.587 * f32::from(p[1]) + 0.114 * f32::from(p[2])) / 255.0;
@@ -302,7 +302,7 @@ fn luma_row(rgb: &[u8], luma: &mut [f32]) {
 /// where both are defined (the pixel and its 4 neighbours have valid depth), from the rows
 /// above, at and below (`[y − 1, y, y + 1]`) of the depth, amplitude and luma. Compiled for
 /// AVX-512 and AVX2 as well, chosen at run time.
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
 fn gradient_row(
     [d0, d1, d2]: [&[f32]; 3],
     [a0, a1, a2]: [&[f32]; 3],
