@@ -60,6 +60,10 @@ if cargo tree -p deard -e features --prefix none | grep -F 'dear-pipeline featur
     echo "deard's build includes dear-pipeline's evaluation harness; it must not" >&2
     exit 1
 fi
+# The instruction sets a board or an older PC runs (issue 36): dear-pipeline's unit tests under
+# qemu-x86_64 emulating an AVX2 CPU and one without AVX, so the versions this AVX-512 machine
+# never dispatches to are tested too (about 25 s).
+tier "CPU levels (scripts/test-cpu-levels.sh)"; scripts/test-cpu-levels.sh
 
 if [ -d train ]; then
     # Two commands, not `a && b`: errexit ignores a failure on the left of `&&`.
