@@ -12,13 +12,14 @@ use dear_v4l2::pixel::PixelFormat;
 pub fn run() -> anyhow::Result<()> {
     let nodes = device::list();
     if nodes.is_empty() {
-        println!("no V4L2 devices (/dev/video*)");
-        return Ok(());
+        return super::write_stdout("no V4L2 devices (/dev/video*)\n");
     }
     for (path, info) in nodes {
         match info {
-            Ok(info) => print!("{}", describe(&info)),
-            Err(e) => println!("{}: cannot be opened: {e}\n", path.display()),
+            Ok(info) => super::write_stdout(&describe(&info))?,
+            Err(e) => {
+                super::write_stdout(&format!("{}: cannot be opened: {e}\n\n", path.display()))?
+            }
         }
     }
     Ok(())

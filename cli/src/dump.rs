@@ -121,14 +121,11 @@ pub fn run(args: &DumpArgs) -> anyhow::Result<()> {
     // directory is a valid (shorter) capture rather than orphaned files.
     let dir = dump.finish()?;
     match outcome {
-        Ok(()) => {
-            println!(
-                "wrote {written} frames from {:?} to {}",
-                args.service,
-                dir.display()
-            );
-            Ok(())
-        }
+        Ok(()) => super::write_stdout(&format!(
+            "wrote {written} frames from {:?} to {}\n",
+            args.service,
+            dir.display()
+        )),
         Err(e) => Err(e.context(format!(
             "{} holds the {written} frames written before",
             dir.display()

@@ -10,6 +10,7 @@ pub mod eval;
 pub mod list;
 pub mod record;
 pub mod stats;
+pub mod view;
 pub mod watch;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -61,6 +62,12 @@ pub enum Command {
     /// (--bundle), with the same pipeline code the daemon runs. Writes eval.json, eval.md and
     /// figures to --out.
     Eval(eval::EvalArgs),
+    /// Serve a read-only web page showing the stream live: colourised depth, the RGB/depth
+    /// blend, the confidence, the calibration over time and the frame rate (docs/view.md).
+    ///
+    /// GET and HEAD only; nothing a browser sends changes anything. One subscription however
+    /// many browsers look; pictures are encoded at most --max-fps times a second.
+    View(view::ViewArgs),
 }
 
 /// Runs the parsed command.
@@ -72,6 +79,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Dump(args) => dump::run(&args),
         Command::Record(args) => record::run(&args),
         Command::Eval(args) => eval::run(&args),
+        Command::View(args) => view::run(&args),
     }
 }
 
@@ -85,7 +93,22 @@ pub fn init_logging() {
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        // Colour only on a terminal: escape codes in a redirected log break every grep.
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
+}
+
+/// Writes `text` to stdout and flushes it. A write error (`> /dev/full`, a full disk) is an
+/// error naming stdout, not a panic as from `print!`; a closed pipe (`dear list | head -1`)
+/// ends the output quietly, as it does for `dear watch`.
+pub fn write_stdout(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        Err(e) => Err(anyhow::Error::new(e).context("cannot write to stdout")),
+    }
 }
 
 /// The error a command returns when Ctrl-C / SIGTERM stopped it before it finished; `main`

@@ -101,11 +101,10 @@ fn count_ports(node: &Node<Transport>, name: &str) -> Option<(usize, usize)> {
 pub fn run() -> anyhow::Result<()> {
     let services = frame_services().context("dear list")?;
     if services.is_empty() {
-        println!(
-            "no DEAR frame services found (is deard running? it publishes {:?} by default)",
+        return super::write_stdout(&format!(
+            "no DEAR frame services found (is deard running? it publishes {:?} by default)\n",
             super::default_service()
-        );
-        return Ok(());
+        ));
     }
     let width = services
         .iter()
@@ -113,16 +112,19 @@ pub fn run() -> anyhow::Result<()> {
         .max()
         .unwrap_or(0)
         .max(7);
-    println!("{:<width$}  publishers  subscribers  processes", "service");
+    let mut text = format!(
+        "{:<width$}  publishers  subscribers  processes\n",
+        "service"
+    );
     let count = |n: Option<usize>| n.map_or_else(|| "?".to_string(), |n| n.to_string());
     for s in &services {
-        println!(
-            "{:<width$}  {:>10}  {:>11}  {:>9}",
+        text.push_str(&format!(
+            "{:<width$}  {:>10}  {:>11}  {:>9}\n",
             s.name,
             count(s.publishers),
             count(s.subscribers),
             s.nodes
-        );
+        ));
     }
-    Ok(())
+    super::write_stdout(&text)
 }

@@ -162,7 +162,7 @@ pub fn run(args: &RecordArgs) -> anyhow::Result<()> {
             )))
         }
     };
-    println!("{}", report(args, &summary, started.elapsed()));
+    super::write_stdout(&format!("{}\n", report(args, &summary, started.elapsed())))?;
     match end {
         End::Limit => Ok(()),
         // Without --count or --seconds a signal is how a recording ends.

@@ -90,16 +90,18 @@ impl CalibrationState {
 
     /// Reads `path`: `Ok(None)` when there is no file yet.
     pub fn load(path: &Path) -> Result<Option<Self>, StateError> {
-        let text = match std::fs::read_to_string(path) {
-            Ok(text) => text,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-            Err(source) => {
-                return Err(StateError::Io {
-                    path: path.into(),
-                    source,
-                })
-            }
-        };
+        let text =
+            match dear_capture::input::read_text_limited(path, dear_capture::input::SETTINGS_LIMIT)
+            {
+                Ok(text) => text,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+                Err(source) => {
+                    return Err(StateError::Io {
+                        path: path.into(),
+                        source,
+                    })
+                }
+            };
         let state: CalibrationState =
             serde_json::from_str(&text).map_err(|source| StateError::Parse {
                 path: path.into(),

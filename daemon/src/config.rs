@@ -33,6 +33,41 @@ pub enum ConfigError {
     },
 }
 
+/// Checks a log filter (`[runtime] log`, `RUST_LOG`): comma-separated directives, each a level
+/// (`off`, `error`, `warn`, `info`, `debug`, `trace`) or `target=level` (a span filter
+/// `target[span]=level` too). tracing's own parser takes a bare word that is not a level as a
+/// *target* enabled at every level, so a misspelt level (`inof`) or junk (`[[[`) silently
+/// turned every other log line off, errors included; here it is refused, naming the
+/// directive. The error text starts with the filter in quotes.
+pub fn validate_log_filter(filter: &str) -> Result<(), String> {
+    use std::str::FromStr;
+    use tracing_subscriber::filter::{Directive, LevelFilter};
+    let levels = "off, error, warn, info, debug, trace";
+    for directive in filter.split(',').map(str::trim).filter(|d| !d.is_empty()) {
+        let bad = |why: String| Err(format!("{filter:?}: directive {directive:?} {why}"));
+        match directive.rsplit_once('=') {
+            None if LevelFilter::from_str(directive).is_ok() => {}
+            None => {
+                return bad(format!(
+                    "is not a level ({levels}); a per-target level is written target=level"
+                ))
+            }
+            Some((target, level)) => {
+                if LevelFilter::from_str(level.trim()).is_err() {
+                    return bad(format!("sets level {level:?}, expected one of {levels}"));
+                }
+                if target.trim().is_empty() {
+                    return bad("has no target before '='".into());
+                }
+                if let Err(e) = Directive::from_str(directive) {
+                    return bad(format!("is not a tracing filter directive: {e}"));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Largest `[capture] queue_depth`: a few frames absorb jitter; a longer queue only adds memory
 /// and latency (each waiting frame is a full RGB-D frame).
 pub const MAX_QUEUE_DEPTH: usize = 64;
@@ -366,9 +401,12 @@ impl Default for RuntimeConfig {
 impl Config {
     /// Reads a TOML file; errors name the file and the offending key.
     pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            path: path.to_path_buf(),
-            source,
+        let limit = dear_capture::input::SETTINGS_LIMIT;
+        let text = dear_capture::input::read_text_limited(path, limit).map_err(|source| {
+            ConfigError::Read {
+                path: path.to_path_buf(),
+                source,
+            }
         })?;
         Self::from_toml(&text).map_err(|e| ConfigError::InFile {
             path: path.to_path_buf(),
@@ -445,6 +483,7 @@ impl Config {
                 "",
             )?;
         }
+        validate_log_filter(&self.runtime.log).map_err(|e| format!("[runtime] log = {e}"))?;
         let stats = self.runtime.stats_interval_s;
         // Written so that NaN fails too.
         if !(MIN_STATS_INTERVAL_S..=MAX_STATS_INTERVAL_S).contains(&stats) {

@@ -157,14 +157,29 @@ fn main() -> ExitCode {
         }
     };
     if cli.print_config {
-        print!(
-            "{}",
-            toml::to_string_pretty(&config).expect("config serialises")
-        );
+        use std::io::Write;
+        let text = toml::to_string_pretty(&config).expect("config serialises");
+        let mut out = std::io::stdout().lock();
+        // A failed write (`> /dev/full`, a closed pipe) is an error, not a panic.
+        if let Err(e) = out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+            eprintln!("deard: cannot write the configuration to stdout: {e}");
+            return ExitCode::FAILURE;
+        }
         return ExitCode::SUCCESS;
     }
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(&config.runtime.log));
+    // RUST_LOG overrides [runtime] log, and is held to the same rules (a misspelt level would
+    // turn every log line off).
+    let rust_log = std::env::var("RUST_LOG")
+        .ok()
+        .filter(|v| !v.trim().is_empty());
+    if let Some(value) = &rust_log {
+        if let Err(e) = deard::config::validate_log_filter(value) {
+            eprintln!("deard: configuration error: RUST_LOG = {e}");
+            return ExitCode::from(2);
+        }
+    }
+    let filter =
+        tracing_subscriber::EnvFilter::new(rust_log.as_deref().unwrap_or(&config.runtime.log));
     // Colour only on a terminal: under systemd the log goes to the journal, in tests to a file,
     // and escape codes there break every `grep key=value`.
     tracing_subscriber::fmt()

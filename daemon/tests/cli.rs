@@ -103,3 +103,120 @@ fn a_missing_capture_is_a_clear_startup_error_printed_once() {
     );
     assert_eq!(err.matches("nope/capture.json").count(), 1, "{err}");
 }
+
+/// Issue 34: a write error on stdout is an error naming it, not a panic (exit 101).
+#[test]
+fn print_config_to_a_full_device_fails_cleanly() {
+    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
+        .arg("--print-config")
+        .stdout(
+            std::fs::OpenOptions::new()
+                .write(true)
+                .open("/dev/full")
+                .unwrap(),
+        )
+        .output()
+        .expect("run deard");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("cannot write the configuration to stdout"),
+        "{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+/// Runs `deard ARGS` and requires it to end by itself within 30 s (a daemon blocked on a FIFO
+/// would not: it is killed and the test fails).
+fn deard_within(args: &[&str]) -> std::process::Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_deard"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run deard");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+    while child.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            let out = child.wait_with_output().unwrap();
+            panic!(
+                "deard {args:?} still running after 30 s: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+fn mkfifo(path: &std::path::Path) {
+    let status = Command::new("mkfifo").arg(path).status().unwrap();
+    assert!(status.success());
+}
+
+/// Issue 34: a FIFO or a device as the configuration file is refused by its type, naming it:
+/// a FIFO blocked the daemon (SIGTERM ignored) and `/dev/zero` grew to gigabytes.
+#[test]
+fn a_fifo_or_device_as_the_configuration_is_refused_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fifo = tmp.path().join("deard.toml");
+    mkfifo(&fifo);
+    for (path, kind) in [
+        (fifo.to_str().unwrap(), "a FIFO"),
+        ("/dev/zero", "a character device"),
+    ] {
+        let out = deard_within(&["--config", path, "--print-config"]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains(path) && err.contains(kind), "{err}");
+    }
+    // A regular file over the 1 MiB a configuration may hold is refused before it is read.
+    let big = tmp.path().join("big.toml");
+    std::fs::write(&big, vec![b'#'; 2 << 20]).unwrap();
+    let out = deard_within(&["--config", big.to_str().unwrap(), "--print-config"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("big.toml") && err.contains("more than the 1.0 MiB"),
+        "{err}"
+    );
+}
+
+/// Issue 34: a FIFO as a bundle's `model.json` is refused, and a bundle path that is a file
+/// is reported as "not a directory" (it was "missing").
+#[test]
+fn a_bundle_that_is_a_file_or_holds_a_fifo_is_refused_by_name() {
+    let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
+    let tmp = tempfile::tempdir().unwrap();
+    let file = tmp.path().join("bundle-file");
+    std::fs::write(&file, "x").unwrap();
+    let service = format!("dear-test/{}/bundle-kind/frames", std::process::id());
+    let run = |bundle: &std::path::Path| {
+        let bundle = bundle.to_str().unwrap();
+        deard_within(&[
+            "--replay",
+            demo,
+            "--exit-when-done",
+            "--service",
+            &service,
+            "--bundle",
+            bundle,
+        ])
+    };
+    let out = run(&file);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("bundle-file: not a directory"), "{err}");
+
+    let dir = tmp.path().join("bundle-fifo");
+    std::fs::create_dir(&dir).unwrap();
+    mkfifo(&dir.join("model.json"));
+    let out = run(&dir);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("model.json") && err.contains("a FIFO"),
+        "{err}"
+    );
+}

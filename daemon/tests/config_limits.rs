@@ -203,3 +203,56 @@ fn max_shared_memory_is_bounded_and_enforced_at_start() {
         "{err}"
     );
 }
+
+/// Issue 34: a misspelt level (`inof`) or junk (`[[[`) in `[runtime] log` is refused by name;
+/// tracing's parser took each as a target and turned every log line off, errors included.
+#[test]
+fn log_filter_is_checked_by_directive() {
+    for bad in ["inof", "[[[", "info,deard=verbose", "=info", "warn,,inof"] {
+        let err = rejected(&format!("[runtime]\nlog = {bad:?}\n"));
+        assert!(
+            err.contains("[runtime] log")
+                && err.contains("directive")
+                && err.contains("off, error, warn, info, debug, trace")
+                || err.contains("no target"),
+            "{bad}: {err}"
+        );
+    }
+    for good in [
+        "info",
+        "WARN",
+        "warn,deard=debug",
+        "deard::run=trace",
+        "off",
+        "",
+    ] {
+        accepted(&format!("[runtime]\nlog = {good:?}\n"));
+    }
+    let err = start_failure("[runtime]\nlog = \"inof\"\n", "log-inof");
+    assert!(err.contains("[runtime] log = \"inof\""), "{err}");
+}
+
+/// `RUST_LOG` (which overrides `[runtime] log`) is held to the same rules.
+#[test]
+fn a_bad_rust_log_is_refused_by_name() {
+    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
+        .args(["--print-config"])
+        .env("RUST_LOG", "inof")
+        .output()
+        .unwrap();
+    // --print-config does not log: it is accepted there.
+    assert!(out.status.success());
+    let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
+    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
+        .args(["--replay", demo, "--exit-when-done", "--refine", "none"])
+        .args([
+            "--service",
+            &format!("dear-test/{}/rust-log/frames", std::process::id()),
+        ])
+        .env("RUST_LOG", "inof")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("RUST_LOG = \"inof\""), "{err}");
+}

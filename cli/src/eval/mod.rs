@@ -267,7 +267,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         fs::write(&csv_path, &tracking)
             .with_context(|| format!("cannot write {}", csv_path.display()))?;
     }
-    print!("{markdown}");
+    crate::write_stdout(&markdown)?;
     eprintln!(
         "dear eval: wrote {} and {}",
         json_path.display(),

@@ -94,10 +94,11 @@ impl ModuleCalibration {
     /// Reads and checks `path`.
     pub fn load(path: &Path) -> Result<Self, ModuleCalibrationError> {
         let text =
-            std::fs::read_to_string(path).map_err(|source| ModuleCalibrationError::Read {
-                path: path.to_path_buf(),
-                source,
-            })?;
+            dear_capture::input::read_text_limited(path, dear_capture::input::SETTINGS_LIMIT)
+                .map_err(|source| ModuleCalibrationError::Read {
+                    path: path.to_path_buf(),
+                    source,
+                })?;
         let cal: ModuleCalibration =
             toml::from_str(&text).map_err(|source| ModuleCalibrationError::Parse {
                 path: path.to_path_buf(),

@@ -53,6 +53,9 @@ impl ReplaySource {
             });
         }
         let end = config.end.unwrap_or(dir.len()).min(dir.len());
+        if let Some(asked) = config.end.filter(|&e| e > dir.len()) {
+            tracing::warn!(path = %config.path.display(), end = asked, frames = dir.len(), "[capture] end is beyond the capture's frames: replaying to its last frame");
+        }
         if config.start >= end {
             return Err(ReplayOpenError::EmptyRange {
                 path: config.path.clone(),

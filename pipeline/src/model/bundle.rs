@@ -47,12 +47,17 @@ impl ModelBundle {
     /// [`BundleError::Onnx`] (tract cannot parse the file), [`BundleError::Io`].
     pub fn load(dir: impl AsRef<Path>) -> Result<ModelBundle, BundleError> {
         let dir = dir.as_ref().to_path_buf();
-        if !dir.is_dir() {
-            return Err(BundleError::Missing { path: dir });
+        match std::fs::metadata(&dir) {
+            Ok(meta) if meta.is_dir() => {}
+            Ok(_) => return Err(BundleError::NotADirectory { path: dir }),
+            Err(e) => return Err(BundleError::io(&dir, e)),
         }
         let manifest_path = dir.join("model.json");
-        let text = std::fs::read_to_string(&manifest_path)
-            .map_err(|e| BundleError::io(&manifest_path, e))?;
+        let text = dear_capture::input::read_text_limited(
+            &manifest_path,
+            dear_capture::input::SETTINGS_LIMIT,
+        )
+        .map_err(|e| BundleError::io(&manifest_path, e))?;
         let manifest = Manifest::parse(&text, &manifest_path)?;
         let mut graphs = Vec::with_capacity(GraphRole::ALL.len());
         for role in GraphRole::ALL {
@@ -60,7 +65,18 @@ impl ModelBundle {
                 .graph(role)
                 .expect("Manifest::parse checked every role");
             let path = dir.join(&spec.file);
-            let bytes = std::fs::read(&path).map_err(|e| BundleError::io(&path, e))?;
+            // Never more than model.json says the graph holds (a FIFO or a device is refused
+            // before it is opened; a larger file before it is read).
+            let meta = std::fs::metadata(&path).map_err(|e| BundleError::io(&path, e))?;
+            if meta.is_file() && meta.len() > spec.bytes {
+                return Err(BundleError::Size {
+                    path,
+                    expected: spec.bytes,
+                    actual: meta.len(),
+                });
+            }
+            let bytes = dear_capture::input::read_limited(&path, spec.bytes)
+                .map_err(|e| BundleError::io(&path, e))?;
             let actual = hex_sha256(&bytes);
             if !actual.eq_ignore_ascii_case(&spec.sha256) {
                 return Err(BundleError::Checksum {

@@ -12,6 +12,12 @@ pub enum BundleError {
         /// The missing path.
         path: PathBuf,
     },
+    /// The bundle path is not a directory (a file, a FIFO).
+    #[error("{path}: not a directory (a model bundle is a directory with model.json, flow.onnx, fuse.onnx and refine.onnx)")]
+    NotADirectory {
+        /// The path given as the bundle.
+        path: PathBuf,
+    },
     /// A file could not be read.
     #[error("{path}: {source}")]
     Io {
