@@ -483,3 +483,103 @@ fn list_finds_the_service_with_its_publisher() {
     assert_eq!(columns[1], "1", "one publisher: {line}");
     assert_eq!(columns[2], "0", "no subscriber: {line}");
 }
+
+/// Issue 34: a write error on stdout is an error naming stdout, not a panic (exit 101).
+#[test]
+fn list_to_a_full_device_fails_cleanly() {
+    let service = unique_service("list-full");
+    let mut publisher = TestPublisher::new(&service);
+    publisher.publish();
+    let full = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/full")
+        .unwrap();
+    let out = dear(&["list"]).stdout(full).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("cannot write to stdout"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+/// Issue 34: a stop and continue (Ctrl-Z then `fg`, a debugger) interrupts the SDK's wait
+/// with EINTR even with no handler for those signals; `dear watch` went on to exit 1 with
+/// `InterruptSignal`. Now it keeps watching to the end.
+#[test]
+fn watch_survives_stop_and_continue() {
+    let service = unique_service("watch-stop");
+    let mut publisher = TestPublisher::new(&service);
+    let mut child = dear(&[
+        "watch",
+        "--service",
+        &service,
+        "--json",
+        "--count-seconds",
+        "3",
+    ])
+    .spawn()
+    .unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    let reader = std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines() {
+            let _ = tx.send(line.unwrap());
+        }
+    });
+    let pid = child.id().to_string();
+    let kill = |signal: &str| {
+        let status = Command::new("kill").args([signal, &pid]).status().unwrap();
+        assert!(status.success());
+    };
+    let mut lines = Vec::new();
+    let mut stopped = false;
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while child.try_wait().unwrap().is_none() {
+        assert!(Instant::now() < deadline, "dear watch still running");
+        lines.extend(rx.try_iter());
+        if !stopped && !lines.is_empty() {
+            // Watching (a line is out): it waits for frames now. Several stops, so at least
+            // one lands in the wait.
+            for _ in 0..5 {
+                kill("-STOP");
+                std::thread::sleep(Duration::from_millis(30));
+                kill("-CONT");
+                std::thread::sleep(Duration::from_millis(30));
+            }
+            stopped = true;
+        }
+        publisher.publish();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let out = child.wait_with_output().unwrap();
+    reader.join().unwrap();
+    lines.extend(rx.try_iter());
+    assert!(
+        out.status.success(),
+        "dear watch: {}: {}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stopped);
+    assert_eq!(lines.len(), 3, "{lines:?}");
+}
+
+/// Issue 34: when every subscriber slot is taken the error states the limit.
+#[test]
+fn the_subscriber_limit_is_stated_in_the_error() {
+    let service = unique_service("limit");
+    let mut publisher = TestPublisher::new(&service);
+    publisher.publish();
+    let clients: Vec<_> = (0..dear_proto::service::QOS_MAX_SUBSCRIBERS)
+        .map(|_| dear_client::Client::connect(&service).unwrap())
+        .collect();
+    let out = dear(&["watch", "--service", &service, "--count-seconds", "1"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains(&service) && err.contains("maximum of 8 subscribers"),
+        "{err}"
+    );
+    drop(clients);
+}

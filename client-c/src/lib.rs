@@ -3,7 +3,8 @@
 //! the committed header is stale).
 //!
 //! The C API mirrors the Rust one: [`dear_client_connect`] is `Client::connect`,
-//! [`dear_client_wait`] is `Client::wait` and hands out a [`dear_frame`] that borrows the
+//! [`dear_client_wait`] is `Client::wait_interruptible` (a signal is `DEAR_INTERRUPTED`) and
+//! hands out a [`dear_frame`] that borrows the
 //! daemon's shared-memory sample (no copy) until [`dear_frame_release`]; the accessors return
 //! pointers into that sample. Every function checks its pointer arguments, catches panics
 //! (none crosses into C) and reports failures as a [`dear_status`] with a message for
@@ -480,7 +481,8 @@ pub unsafe extern "C" fn dear_client_wait(
         };
         let client = &client.client;
         let service = client.service();
-        let frame = match client.wait(Duration::from_millis(u64::from(timeout_ms))) {
+        let timeout = Duration::from_millis(u64::from(timeout_ms));
+        let frame = match client.wait_interruptible(timeout) {
             Ok(Some(frame)) => frame,
             Ok(None) => {
                 return Err(Failure(

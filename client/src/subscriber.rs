@@ -54,7 +54,13 @@ pub enum ConnectError {
         #[source]
         source: EventServiceError,
     },
-    /// Typically: the service already has its maximum of subscribers.
+    /// Every subscriber slot of the service is taken.
+    #[error("cannot connect to {service:?}: it already has its maximum of {max} subscribers (a service serves at most {max} client processes at once; `dear list` shows them; one ends when its process exits)", max = dear_proto::service::QOS_MAX_SUBSCRIBERS)]
+    SubscriberLimit {
+        service: String,
+        #[source]
+        source: SubscriberCreateError,
+    },
     #[error("cannot connect to {service:?}: cannot create a subscriber")]
     Subscriber {
         service: String,
@@ -78,7 +84,8 @@ pub enum ReceiveError {
         #[source]
         source: iceoryx2::port::ReceiveError,
     },
-    /// Waiting for the daemon's frame event failed (also when a signal interrupted it).
+    /// Waiting for the daemon's frame event failed (a signal only from
+    /// [`Client::wait_interruptible`]; [`Client::wait`] returns early instead).
     #[error("waiting for a frame from {service:?} failed")]
     Wait {
         service: String,
@@ -148,14 +155,21 @@ impl Client {
                 service: name(),
                 source,
             })?;
-        let subscriber =
-            frames
-                .subscriber_builder()
-                .create()
-                .map_err(|source| ConnectError::Subscriber {
+        let subscriber = frames
+            .subscriber_builder()
+            .create()
+            .map_err(|source| match source {
+                SubscriberCreateError::ExceedsMaxSupportedSubscribers => {
+                    ConnectError::SubscriberLimit {
+                        service: name(),
+                        source,
+                    }
+                }
+                source => ConnectError::Subscriber {
                     service: name(),
                     source,
-                })?;
+                },
+            })?;
         let listener =
             events
                 .listener_builder()
@@ -198,8 +212,25 @@ impl Client {
     }
 
     /// Waits up to `timeout` for a frame (event-driven: the thread sleeps until the daemon
-    /// announces one). `Ok(None)` on timeout.
+    /// announces one). `Ok(None)` on timeout, and also early when a signal interrupted the
+    /// wait: a handler of the application's (Ctrl-C), or a stop and continue (Ctrl-Z then `fg`,
+    /// a debugger), which interrupts a waiting thread even with no handler installed. Neither is
+    /// a failure of the service: check your own flags and call again.
     pub fn wait(&self, timeout: Duration) -> Result<Option<Frame>, ReceiveError> {
+        match self.wait_interruptible(timeout) {
+            // A frame that came meanwhile is taken; otherwise the caller gets control back.
+            Err(ReceiveError::Wait {
+                source: ListenerWaitError::InterruptSignal,
+                ..
+            }) => self.try_receive(),
+            other => other,
+        }
+    }
+
+    /// [`Client::wait`], except that a signal ends the wait with
+    /// [`ReceiveError::Wait`] holding [`ListenerWaitError::InterruptSignal`], for callers that
+    /// report it (the C SDK's `DEAR_INTERRUPTED`).
+    pub fn wait_interruptible(&self, timeout: Duration) -> Result<Option<Frame>, ReceiveError> {
         let deadline = Instant::now() + timeout;
         loop {
             if let Some(frame) = self.try_receive()? {
