@@ -39,6 +39,43 @@ pub struct RecordSummary {
     pub out_of_order: u64,
 }
 
+/// A frame could not be written (a full disk: ENOSPC): says so at once, naming the file,
+/// removes what was written of the frame `partial` (on a full disk that also frees room) and
+/// writes the manifest of the frames before it, so the recording replays up to there. The
+/// recording stops; the daemon serves on and exits non-zero when stopped.
+fn stop_on_error(
+    writer: &CaptureWriter,
+    dir: &Path,
+    partial: Option<u64>,
+    written: usize,
+    error: CaptureError,
+) -> CaptureError {
+    tracing::error!(path = %dir.display(), %error, frames_kept = written, "the recording stopped: a frame could not be written (the stream goes on; deard will exit with an error)");
+    let partial = partial.map(|index| dear_capture::FramePaths::new(dir, index));
+    let tmp = dir.join(format!("{}.tmp", dear_capture::layout::MANIFEST_FILE));
+    let files = partial
+        .iter()
+        .flat_map(|p| [&p.rgb, &p.amplitude, &p.depth]);
+    for file in files.chain([&tmp]) {
+        match std::fs::remove_file(file) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => {
+                tracing::warn!(file = %file.display(), error = %e, "cannot remove a partly written frame file")
+            }
+        }
+    }
+    match writer.write_manifest() {
+        Ok(()) => {
+            tracing::info!(path = %dir.display(), frames = written, "wrote the manifest of the frames recorded before the error: the directory replays up to there")
+        }
+        Err(e) => {
+            tracing::error!(error = %e, "the manifest cannot be written either: the recording does not replay")
+        }
+    }
+    error
+}
+
 /// The writer thread and the queue to it.
 pub struct Recorder {
     tx: Option<SyncSender<Box<RgbdFrame>>>,
@@ -55,6 +92,7 @@ impl Recorder {
             source,
         })?;
         let (tx, rx) = mpsc::sync_channel::<Box<RgbdFrame>>(QUEUE);
+        let dir = path.to_path_buf();
         let thread = thread::Builder::new()
             .name("record".into())
             .spawn(move || {
@@ -68,10 +106,15 @@ impl Recorder {
                     last_ts = Some(frame.timestamp_ns);
                     // Sequential ids: a looping replay repeats its own.
                     frame.index = summary.written as u64;
-                    writer.write_frame(&frame)?;
+                    if let Err(e) = writer.write_frame(&frame) {
+                        let partial = Some(frame.index);
+                        return Err(stop_on_error(&writer, &dir, partial, summary.written, e));
+                    }
                     summary.written += 1;
                     if summary.written % MANIFEST_EVERY == 0 {
-                        writer.write_manifest()?;
+                        if let Err(e) = writer.write_manifest() {
+                            return Err(stop_on_error(&writer, &dir, None, summary.written, e));
+                        }
                     }
                 }
                 writer.finish()?;

@@ -265,9 +265,13 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
     save_calibration(config, latest_estimate.take(), &description);
     queue.close();
     stats.dropped = queue.dropped();
-    if capture.join().is_err() {
-        tracing::error!("the capture thread panicked");
-    }
+    let recording = match capture.join() {
+        Ok(recording) => recording,
+        Err(_) => {
+            tracing::error!("the capture thread panicked");
+            None
+        }
+    };
     tracing::info!(
         published = stats.published,
         skipped = stats.skipped,
@@ -278,9 +282,11 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         uptime_s = stats.uptime_s(),
         "stopped"
     );
-    match failure {
-        Some(reason) => Err(RunError::SourceFailed(reason)),
-        None => Ok(stats),
+    match (failure, recording) {
+        (Some(reason), _) => Err(RunError::SourceFailed(reason)),
+        // `--record` failed (a full disk): said at once in the log; the exit status says it too.
+        (None, Some(e)) => Err(RunError::Record(e)),
+        (None, None) => Ok(stats),
     }
 }
 
@@ -448,14 +454,15 @@ impl Watchdog {
 /// fails, the queue closes or shutdown is requested. The source's waits give way to `shutdown`
 /// and the queue's to [`FrameQueue::close`], so the thread can always be joined promptly.
 /// Depth beyond the source's [`DepthLimit`](crate::capture::DepthLimit) is marked invalid
-/// (and counted in `beyond_range`) first, so the recorder records what is processed.
+/// (and counted in `beyond_range`) first, so the recorder records what is processed. Returns
+/// why the recording failed, if it did.
 fn spawn_capture(
     mut source: Box<dyn FrameSource>,
     mut recorder: Option<Recorder>,
     queue: Arc<FrameQueue<SourceItem>>,
     shutdown: Arc<AtomicBool>,
     beyond_range: Arc<BeyondRange>,
-) -> thread::JoinHandle<()> {
+) -> thread::JoinHandle<Option<RecordError>> {
     let limit = source.depth_limit();
     thread::Builder::new()
         .name("capture".into())
@@ -478,11 +485,10 @@ fn spawn_capture(
                     break;
                 }
             }
-            if let Some(rec) = recorder {
-                if let Err(e) = rec.finish() {
-                    tracing::error!(error = %e, "the recording could not be finished");
-                }
-            }
+            let rec = recorder?;
+            let e = rec.finish().err()?;
+            tracing::error!(error = %e, "the recording could not be finished");
+            Some(e)
         })
         .expect("spawn capture thread")
 }

@@ -450,3 +450,96 @@ fn a_full_disk_under_the_log_does_not_stop_the_daemon() {
         .expect("run deard");
     assert!(status.success(), "{status}");
 }
+
+/// Issue 34: a FIFO in place of a frame's PNG is a skipped frame naming the file, not a daemon
+/// blocked in `open` (SIGTERM was ignored; only SIGKILL ended it); the other frames are served.
+#[test]
+fn a_fifo_as_a_frame_file_is_skipped_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = write_capture(&tmp.path().join("cap"), &[(0, true), (1, true), (2, true)]);
+    let rgb = FramePaths::new(&capture, 1).rgb;
+    std::fs::remove_file(&rgb).unwrap();
+    let status = Command::new("mkfifo").arg(&rgb).status().unwrap();
+    assert!(status.success());
+    let log = tmp.path().join("deard.log");
+    let mut daemon = Daemon::start(
+        &unique_service("fifo-frame"),
+        &capture,
+        &["--pacing", "fast", "--exit-when-done"],
+        &log,
+    );
+    let status = daemon.wait(Duration::from_secs(30));
+    let text = daemon.log_text();
+    assert!(status.is_some_and(|s| s.success()), "{status:?}: {text}");
+    assert!(
+        text.contains("frame skipped")
+            && text.contains("000001.rgb.png")
+            && text.contains("a FIFO"),
+        "{text}"
+    );
+    assert!(text.contains("published=2"), "{text}");
+}
+
+/// Issue 34: `--record` onto a disk that fills up says so at once, naming the file, leaves a
+/// recording that replays up to the last whole frame (its capture.json written), serves on,
+/// and exits non-zero. Needs root to mount a 3 MB tmpfs; CI runs as root.
+#[test]
+fn a_recording_that_fills_its_disk_fails_loudly_and_replays() {
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        eprintln!("not root: cannot mount a small tmpfs; not checked");
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let mnt = tmp.path().join("small");
+    std::fs::create_dir(&mnt).unwrap();
+    let mounted = Command::new("mount")
+        .args(["-t", "tmpfs", "-o", "size=3m", "tmpfs"])
+        .arg(&mnt)
+        .status()
+        .unwrap();
+    assert!(mounted.success(), "mount a tmpfs");
+    struct Unmount(PathBuf);
+    impl Drop for Unmount {
+        fn drop(&mut self) {
+            let _ = Command::new("umount").arg(&self.0).status();
+        }
+    }
+    let _unmount = Unmount(mnt.clone());
+    let rec = mnt.join("rec");
+    let log = tmp.path().join("deard.log");
+    let mut daemon = Daemon::start(
+        &unique_service("record-enospc"),
+        &demo(),
+        &["--loop", "--record", rec.to_str().unwrap()],
+        &log,
+    );
+    // Said while the daemon still serves, not at shutdown.
+    daemon.wait_for_log("the recording stopped", Duration::from_secs(120));
+    daemon.wait_for_log(
+        "wrote the manifest of the frames recorded before the error",
+        STOP_WITHIN,
+    );
+    let text = daemon.log_text();
+    assert!(
+        text.contains("No space left on device") && text.contains(rec.to_str().unwrap()),
+        "{text}"
+    );
+    assert!(
+        daemon.child.try_wait().unwrap().is_none(),
+        "still serving: {text}"
+    );
+    let recorded = CaptureDir::open(&rec).expect("the partial recording opens");
+    assert!(!recorded.is_empty());
+    for k in 0..recorded.len() {
+        recorded.read_frame(k).expect("every listed frame is whole");
+    }
+    daemon.signal("-TERM");
+    let status = daemon.wait(STOP_WITHIN).expect("deard stops on SIGTERM");
+    let text = daemon.log_text();
+    assert!(
+        !status.success(),
+        "a failed recording is a failed run: {text}"
+    );
+    assert!(text.contains("--record"), "{text}");
+}
