@@ -17,3 +17,4 @@ pub mod record;
 pub mod run;
 pub mod shared_memory;
 pub mod stats;
+pub mod transport_guard;

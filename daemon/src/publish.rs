@@ -2,7 +2,7 @@
 //! loaned shared-memory sample (no intermediate frame buffer), sent, and announced on the event
 //! service so subscribers wake up.
 
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 use std::time::Instant;
 
 use dear_proto::service::{
@@ -17,6 +17,7 @@ use iceoryx2::prelude::*;
 use ndarray::{ArrayViewMut2, ArrayViewMut3};
 
 use crate::processing::{micros, FrameOutput};
+use crate::transport_guard::{self, ServiceFiles};
 
 /// Why the publishing end of a frame service cannot be made.
 #[derive(Debug, thiserror::Error)]
@@ -84,6 +85,12 @@ pub enum PublishError<E: std::error::Error + 'static> {
     /// Filling the sample failed (it is dropped unsent).
     #[error(transparent)]
     Fill(E),
+    /// The transport's files were deleted and cannot be made again yet
+    /// ([`FramePublisher::check_transport`]).
+    #[error(
+        "the transport of {service:?} is not available (its files were deleted; being made again)"
+    )]
+    NoTransport { service: String },
     /// The sample could not be sent.
     #[error("cannot send on {service:?}: {source:?}")]
     Send {
@@ -93,12 +100,25 @@ pub enum PublishError<E: std::error::Error + 'static> {
     },
 }
 
-/// The daemon's publishing end of one frame service.
-pub struct FramePublisher {
-    name: String,
+/// The iceoryx2 ports of a [`FramePublisher`]: made again when the transport's files are
+/// deleted under it.
+struct Ports {
     node: Node<Transport>,
     publisher: Publisher<Transport, [u8], FrameHeader>,
     notifier: Notifier<Transport>,
+    // Keep the port factories alive as long as the ports.
+    frames: FrameService,
+    _events: FrameEventService,
+    /// The files new clients need, checked every second.
+    files: ServiceFiles,
+}
+
+/// The daemon's publishing end of one frame service.
+pub struct FramePublisher {
+    name: String,
+    /// The transport's configuration, dead-node cleanup on creation off.
+    config: Config,
+    root: std::path::PathBuf,
     layout: PayloadLayout,
     /// This instance's [`FrameHeader::run_id`], drawn once in `new`.
     run_id: u64,
@@ -106,9 +126,8 @@ pub struct FramePublisher {
     /// `&self`, and the publisher is used from the frame loop's thread only (iceoryx2 ports are
     /// not `Sync` either).
     sequence: Cell<u64>,
-    // Keep the port factories alive as long as the ports.
-    _frames: FrameService,
-    _events: FrameEventService,
+    /// `None` while the transport cannot be made again (logged; retried every second).
+    ports: RefCell<Option<Ports>>,
 }
 
 impl FramePublisher {
@@ -127,56 +146,61 @@ impl FramePublisher {
         // `create` had already removed everything).
         config.global.node.cleanup_dead_nodes_on_creation = false;
         tracing::info!(root = %config.global.root_path(), "iceoryx2");
-        let node = NodeBuilder::new()
-            .config(&config)
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<Transport>()
-            .map_err(|source| PublisherError::Node {
-                root: config.global.root_path().to_string(),
-                source,
-            })?;
-        log_cleanup(node.try_cleanup_dead_nodes(), "at start");
-        let frames = frame_service(&node, name)?;
-        let events = frame_event_service(&node, name)?;
-        let service = || name.to_string();
+        let root = dear_proto::transport::root_dir(&config);
         let layout =
             PayloadLayout::new(width, height).map_err(|source| PublisherError::Layout {
-                service: service(),
+                service: name.to_string(),
                 source,
             })?;
-        let publisher = frames
-            .publisher_builder()
-            .initial_max_slice_len(layout.size)
-            .create()
-            .map_err(|source| PublisherError::Publisher {
-                service: service(),
-                source,
-            })?;
-        let notifier =
-            events
-                .notifier_builder()
-                .create()
-                .map_err(|source| PublisherError::Notifier {
-                    service: service(),
-                    source,
-                })?;
-        refuse_a_second_publisher(&frames, publisher.id(), name)?;
+        let ports = open_ports(&config, &root, name, layout)?;
+        refuse_a_second_publisher(&ports.frames, ports.publisher.id(), name)?;
         let run_id = dear_proto::random_run_id().map_err(|source| PublisherError::RunId {
-            service: service(),
+            service: name.to_string(),
             source,
         })?;
         tracing::info!(run_id = format_args!("{run_id:016x}"), "publisher instance");
         Ok(FramePublisher {
             name: name.to_string(),
-            node,
-            publisher,
-            notifier,
+            config,
+            root,
             layout,
             run_id,
             sequence: Cell::new(0),
-            _frames: frames,
-            _events: events,
+            ports: RefCell::new(Some(ports)),
         })
+    }
+
+    /// Checks the transport's files (called every second by the daemon): repairs a damaged
+    /// node counter, and when a file new clients need was deleted (`rm -rf` of the root, a
+    /// tmpfs cleaner), makes the service again under the same run id, logging why. Running
+    /// clients keep the old files mapped and stop receiving; new clients (and clients that
+    /// connect again) find the new service.
+    pub fn check_transport(&self) {
+        transport_guard::repair_global_mgmt(&self.root);
+        let mut ports = self.ports.borrow_mut();
+        if let Some(p) = ports.as_ref() {
+            let Some(missing) = p.files.missing() else {
+                return;
+            };
+            tracing::error!(file = %missing.display(), root = %self.root.display(), service = %self.name, "a file of the transport was deleted: no new client could find the service; making it again");
+        }
+        // The old ports go first: their node would otherwise count as a second publisher.
+        *ports = None;
+        let reopened = dear_proto::transport::prepare_root(&self.config)
+            .map_err(|e| e.to_string())
+            .and_then(|_| {
+                open_ports(&self.config, &self.root, &self.name, self.layout)
+                    .map_err(|e| e.to_string())
+            });
+        match reopened {
+            Ok(p) => {
+                tracing::warn!(root = %self.root.display(), service = %self.name, files = p.files.len(), "made the transport's files again: new clients can connect (running clients must connect again)");
+                *ports = Some(p);
+            }
+            Err(e) => {
+                tracing::error!(error = %e, service = %self.name, "cannot make the transport's files again; frames are not published until it can (retried every second)")
+            }
+        }
     }
 
     pub fn name(&self) -> &str {
@@ -201,10 +225,17 @@ impl FramePublisher {
         fill: impl FnOnce(&mut FrameHeader, FrameOutput<'_>) -> Result<(), E>,
     ) -> Result<FrameHeader, PublishError<E>> {
         let layout = self.layout;
+        let ports = self.ports.borrow();
+        let Some(ports) = ports.as_ref() else {
+            return Err(PublishError::NoTransport {
+                service: self.name.clone(),
+            });
+        };
         let t_loan = Instant::now();
         // `loan_slice` zero-fills (one memset); the frame itself is never copied afterwards.
         let mut sample =
-            self.publisher
+            ports
+                .publisher
                 .loan_slice(layout.size)
                 .map_err(|source| PublishError::Loan {
                     service: self.name.clone(),
@@ -240,7 +271,7 @@ impl FramePublisher {
             service: self.name.clone(),
             source,
         })?;
-        if let Err(e) = self.notifier.notify() {
+        if let Err(e) = ports.notifier.notify() {
             tracing::warn!(error = ?e, "cannot notify listeners");
         }
         Ok(header)
@@ -249,8 +280,70 @@ impl FramePublisher {
     /// Removes ports of subscribers that died without cleaning up, so their queues stop taking
     /// samples. Called periodically by the daemon.
     pub fn cleanup_dead_peers(&self) {
-        log_cleanup(self.node.try_cleanup_dead_nodes(), "of dead clients");
+        if let Some(ports) = self.ports.borrow().as_ref() {
+            log_cleanup(ports.node.try_cleanup_dead_nodes(), "of dead clients");
+        }
     }
+}
+
+/// Makes the node, the services and the ports under `root`: symbolic links in the root are
+/// removed first and a damaged node counter repaired ([`transport_guard`]), and the data
+/// segment is made read-only to clients once it exists.
+fn open_ports(
+    config: &Config,
+    root: &std::path::Path,
+    name: &str,
+    layout: PayloadLayout,
+) -> Result<Ports, PublisherError> {
+    transport_guard::remove_symlinks(root);
+    transport_guard::repair_global_mgmt(root);
+    let node = NodeBuilder::new()
+        .config(config)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Transport>()
+        .map_err(|source| PublisherError::Node {
+            root: config.global.root_path().to_string(),
+            source,
+        })?;
+    log_cleanup(node.try_cleanup_dead_nodes(), "at start");
+    let frames = frame_service(&node, name)?;
+    let events = frame_event_service(&node, name)?;
+    let service = || name.to_string();
+    let publisher = frames
+        .publisher_builder()
+        .initial_max_slice_len(layout.size)
+        .create()
+        .map_err(|source| PublisherError::Publisher {
+            service: service(),
+            source,
+        })?;
+    let notifier =
+        events
+            .notifier_builder()
+            .create()
+            .map_err(|source| PublisherError::Notifier {
+                service: service(),
+                source,
+            })?;
+    let publisher_id = publisher.id().value();
+    let restricted = transport_guard::restrict_data_segments(root, publisher_id);
+    tracing::info!(files = ?restricted, "data segment read-only to clients (mode 0644)");
+    let files = ServiceFiles::snapshot(
+        root,
+        &[
+            frames.service_hash().as_str(),
+            events.service_hash().as_str(),
+        ],
+        publisher_id,
+    );
+    Ok(Ports {
+        node,
+        publisher,
+        notifier,
+        frames,
+        _events: events,
+        files,
+    })
 }
 
 /// Logs what a dead-node cleanup did, when it did anything.

@@ -240,6 +240,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         }
         if last_cleanup.elapsed() >= DEAD_PEER_CLEANUP {
             publisher.cleanup_dead_peers();
+            publisher.check_transport();
             last_cleanup = Instant::now();
         }
         if let Some(report) = path.stats.poll() {

@@ -181,6 +181,29 @@ pub enum RootError {
     },
     #[error("the iceoryx2 root {} is not a directory", path.display())]
     NotADirectory { path: std::path::PathBuf },
+    /// A symbolic link could be pointed anywhere by whoever may replace it.
+    #[error("the iceoryx2 root {} is a symbolic link; set {IOX2_ROOT_ENV} to the directory itself", path.display())]
+    Symlink { path: std::path::PathBuf },
+    /// `/dev/shm`, `/tmp` and the like: every user may create files there.
+    #[error("the iceoryx2 root {} is a shared directory (mode {mode:o}: writable by every user, or sticky as /tmp and /dev/shm are): any user could read the frames and rewrite the transport's files; set {IOX2_ROOT_ENV} to a directory of the service's own below it, e.g. /dev/shm/dear", path.display())]
+    Shared { path: std::path::PathBuf, mode: u32 },
+    /// The owner of a directory above the root can rename the root away and put another in its
+    /// place.
+    #[error("the iceoryx2 root {} is below {}, which belongs to uid {owner} (not this user, uid {me}, or root): that user could replace the root; choose a root below directories of root or of this user", path.display(), ancestor.display())]
+    ForeignAncestor {
+        path: std::path::PathBuf,
+        ancestor: std::path::PathBuf,
+        owner: u32,
+        me: u32,
+    },
+    /// A directory above the root that other users may write (and that is not sticky): they
+    /// can rename the root away and put another in its place.
+    #[error("the iceoryx2 root {} is below {} (mode {mode:o}), which other users can write and which is not sticky: they could replace the root; choose a root below directories only root or this user can write", path.display(), ancestor.display())]
+    WritableAncestor {
+        path: std::path::PathBuf,
+        ancestor: std::path::PathBuf,
+        mode: u32,
+    },
     /// Someone else made the directory first: using it would hand them the frames (they could
     /// read and rewrite every file in it) — the pre-emption a world-writable parent such as
     /// `/dev/shm` or `/tmp` allows.
@@ -198,12 +221,47 @@ pub enum RootError {
 pub fn existing_root(config: &Config) -> Result<Option<std::path::PathBuf>, RootError> {
     let path = root_dir(config);
     match std::fs::metadata(&path) {
+        Ok(meta) if meta.is_dir() => {
+            check_access(&path)?;
+            Ok(Some(path))
+        }
         Ok(_) => Ok(Some(path)),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
         Err(source) if source.kind() == std::io::ErrorKind::PermissionDenied => {
             Err(RootError::NotReachable { path, source })
         }
         Err(source) => Err(RootError::Inspect { path, source }),
+    }
+}
+
+/// A root this process may stat but not use (`/dev/shm/dear` is `0770`: an outsider sees it
+/// but cannot enter it) is [`RootError::NotReachable`] too, before iceoryx2 fails on it with
+/// `InsufficientPermissions` or `UnableToGenerateUniqueNodeId`.
+fn check_access(path: &std::path::Path) -> Result<(), RootError> {
+    use std::os::unix::ffi::OsStrExt;
+    let Ok(c_path) = std::ffi::CString::new(path.as_os_str().as_bytes()) else {
+        return Ok(()); // iceoryx2 refuses such a path itself (node_config).
+    };
+    // SAFETY: a NUL-terminated path; faccessat has no other preconditions.
+    let rc = unsafe {
+        libc::faccessat(
+            libc::AT_FDCWD,
+            c_path.as_ptr(),
+            libc::R_OK | libc::W_OK | libc::X_OK,
+            libc::AT_EACCESS,
+        )
+    };
+    if rc == 0 {
+        return Ok(());
+    }
+    let source = std::io::Error::last_os_error();
+    match source.kind() {
+        std::io::ErrorKind::PermissionDenied => Err(RootError::NotReachable {
+            path: path.to_path_buf(),
+            source,
+        }),
+        // Anything else (a read-only file system) is iceoryx2's to report.
+        _ => Ok(()),
     }
 }
 
@@ -228,8 +286,10 @@ pub fn create_root(config: &Config) -> Result<std::path::PathBuf, RootError> {
 }
 
 /// Makes sure the daemon's root directory is its own before any iceoryx2 file is made there:
-/// creates it ([`create_root`]) or checks that an existing one is a directory owned by this
-/// user or root.
+/// creates it ([`create_root`]) or checks that an existing one is a directory (not a symbolic
+/// link) owned by this user or root, not shared with every user (world-writable or sticky:
+/// `/dev/shm`, `/tmp` themselves), below directories that only root or this user can change
+/// (issue 34).
 pub fn prepare_root(config: &Config) -> Result<std::path::PathBuf, RootError> {
     use std::os::unix::fs::MetadataExt;
     let path = create_root(config)?;
@@ -237,6 +297,9 @@ pub fn prepare_root(config: &Config) -> Result<std::path::PathBuf, RootError> {
         path: path.clone(),
         source,
     })?;
+    if meta.file_type().is_symlink() {
+        return Err(RootError::Symlink { path });
+    }
     if !meta.is_dir() {
         return Err(RootError::NotADirectory { path });
     }
@@ -249,7 +312,46 @@ pub fn prepare_root(config: &Config) -> Result<std::path::PathBuf, RootError> {
             me,
         });
     }
+    let mode = meta.mode() & 0o7777;
+    if mode & 0o002 != 0 || mode & 0o1000 != 0 {
+        return Err(RootError::Shared { path, mode });
+    }
+    check_ancestors(&path, me)?;
     Ok(path)
+}
+
+/// Every directory above the root must be root's or this user's, and writable by nobody else
+/// unless sticky (`/dev/shm`, `/tmp`: there others cannot rename or remove what is not
+/// theirs): otherwise another user could move the root away and put one of theirs in its place.
+fn check_ancestors(path: &std::path::Path, me: u32) -> Result<(), RootError> {
+    use std::os::unix::fs::MetadataExt;
+    let inspect = |source| RootError::Inspect {
+        path: path.to_path_buf(),
+        source,
+    };
+    // The directories the path really passes through (a symbolic link above the root is
+    // followed by the kernel, so its target's directories are the ones that count).
+    let real = std::fs::canonicalize(path).map_err(inspect)?;
+    for ancestor in real.ancestors().skip(1) {
+        let meta = std::fs::metadata(ancestor).map_err(inspect)?;
+        let (owner, mode) = (meta.uid(), meta.mode() & 0o7777);
+        if owner != me && owner != 0 {
+            return Err(RootError::ForeignAncestor {
+                path: path.to_path_buf(),
+                ancestor: ancestor.to_path_buf(),
+                owner,
+                me,
+            });
+        }
+        if mode & 0o022 != 0 && mode & 0o1000 == 0 {
+            return Err(RootError::WritableAncestor {
+                path: path.to_path_buf(),
+                ancestor: ancestor.to_path_buf(),
+                mode,
+            });
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -310,6 +412,71 @@ mod tests {
         let e = prepare_root(&with_root(file.to_str().unwrap()).unwrap()).unwrap_err();
         assert!(matches!(e, RootError::NotADirectory { .. }), "{e}");
         assert!(e.to_string().contains("file"), "{e}");
+    }
+
+    /// Issue 34: `/dev/shm` or `/tmp` themselves (world-writable, sticky), a symbolic link,
+    /// and a root below a directory others may write are refused by name.
+    #[test]
+    fn prepare_root_refuses_shared_linked_and_exposed_roots() {
+        use std::os::unix::fs::PermissionsExt;
+        let tmp = tempfile::tempdir().unwrap();
+        let chmod = |p: &std::path::Path, mode| {
+            std::fs::set_permissions(p, std::fs::Permissions::from_mode(mode)).unwrap()
+        };
+        let prepare = |p: &std::path::Path| prepare_root(&with_root(p.to_str().unwrap()).unwrap());
+
+        let shared = tmp.path().join("shared");
+        std::fs::create_dir(&shared).unwrap();
+        for mode in [0o1777, 0o777, 0o1770] {
+            chmod(&shared, mode);
+            let e = prepare(&shared).unwrap_err();
+            assert!(matches!(e, RootError::Shared { .. }), "{mode:o}: {e}");
+            assert!(e.to_string().contains("shared directory"), "{e}");
+        }
+        for real in ["/dev/shm", "/tmp"] {
+            let e = prepare(std::path::Path::new(real)).unwrap_err();
+            assert!(matches!(e, RootError::Shared { .. }), "{real}: {e}");
+        }
+        // Below a sticky shared directory is fine (as /dev/shm/dear): others cannot move it.
+        let below = shared.join("dear");
+        prepare(&below).unwrap();
+        // Below a directory others may write and rename in, it is not.
+        chmod(&shared, 0o777);
+        let e = prepare(&below).unwrap_err();
+        assert!(matches!(e, RootError::WritableAncestor { .. }), "{e}");
+        assert!(e.to_string().contains("shared"), "{e}");
+        chmod(&shared, 0o755);
+        prepare(&below).unwrap();
+
+        let link = tmp.path().join("link");
+        std::os::unix::fs::symlink(&below, &link).unwrap();
+        let e = prepare(&link).unwrap_err();
+        assert!(matches!(e, RootError::Symlink { .. }), "{e}");
+    }
+
+    /// A root below a directory another (non-root) user owns is refused, naming both. Needs
+    /// root to make a directory of another user; CI runs as root.
+    #[test]
+    fn prepare_root_refuses_a_root_below_another_users_directory() {
+        // SAFETY: geteuid has no preconditions.
+        if unsafe { libc::geteuid() } != 0 {
+            eprintln!("not root: cannot give a directory to another user; not checked");
+            return;
+        }
+        let tmp = tempfile::tempdir().unwrap();
+        let theirs = tmp.path().join("theirs");
+        std::fs::create_dir(&theirs).unwrap();
+        std::os::unix::fs::chown(&theirs, Some(65534), None).unwrap();
+        let root = theirs.join("dear");
+        let e = prepare_root(&with_root(root.to_str().unwrap()).unwrap()).unwrap_err();
+        assert!(
+            matches!(e, RootError::ForeignAncestor { owner: 65534, .. }),
+            "{e}"
+        );
+        assert!(
+            e.to_string().contains("theirs") && e.to_string().contains("uid 65534"),
+            "{e}"
+        );
     }
 
     /// A root another user made first (in `/dev/shm` or `/tmp` anyone can) is refused, naming

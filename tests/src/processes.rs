@@ -41,8 +41,22 @@ pub struct Daemon {
 impl Daemon {
     /// Starts `deard --service <service> <args...>` with its log in `log`.
     pub fn start<S: AsRef<std::ffi::OsStr>>(service: &str, args: &[S], log: &Path) -> Daemon {
+        Daemon::start_in(None, service, args, log)
+    }
+
+    /// [`Daemon::start`] with `DEAR_IOX2_ROOT` set to `root` (when given).
+    pub fn start_in<S: AsRef<std::ffi::OsStr>>(
+        root: Option<&Path>,
+        service: &str,
+        args: &[S],
+        log: &Path,
+    ) -> Daemon {
         let log_file = File::create(log).expect("daemon log file");
-        let child = Command::new(binary("deard"))
+        let mut command = Command::new(binary("deard"));
+        if let Some(root) = root {
+            command.env(dear_proto::IOX2_ROOT_ENV, root);
+        }
+        let child = command
             .args(["--service", service, "--stats-interval", "1"])
             .args(args)
             .env("RUST_LOG", "info")
@@ -154,18 +168,7 @@ impl Probe {
 
     /// [`Probe::start`] for a slow client: the probe sleeps `delay` after each frame.
     pub fn start_with_delay(service: &str, count: usize, delay: Duration) -> Probe {
-        let mut child = Command::new(binary("dear-probe"))
-            .args([
-                "--service",
-                service,
-                "--count",
-                &count.to_string(),
-                "--timeout-s",
-                "300",
-                "--delay-ms",
-                &delay.as_millis().to_string(),
-            ])
-            .stdout(Stdio::piped())
+        let mut child = Probe::command(service, count, delay)
             .spawn()
             .expect("spawn dear-probe");
         let lines = reader_thread(child.stdout.take().expect("probe stdout"));
@@ -176,6 +179,46 @@ impl Probe {
             .expect("probe did not start");
         assert_eq!(first, "ready");
         probe
+    }
+
+    /// The command that starts a probe (stdout piped), for a test to add to: the root
+    /// (`DEAR_IOX2_ROOT`), another user.
+    pub fn command(service: &str, count: usize, delay: Duration) -> Command {
+        let mut command = Command::new(binary("dear-probe"));
+        command
+            .args([
+                "--service",
+                service,
+                "--count",
+                &count.to_string(),
+                "--timeout-s",
+                "300",
+                "--delay-ms",
+                &delay.as_millis().to_string(),
+            ])
+            .stdout(Stdio::piped());
+        command
+    }
+
+    /// Starts the probe `command` made ([`Probe::command`]) and waits until it has subscribed;
+    /// panics with its standard error if it does not.
+    pub fn spawn(mut command: Command) -> Probe {
+        let mut child = command
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn dear-probe");
+        let lines = reader_thread(child.stdout.take().expect("probe stdout"));
+        let mut probe = Probe { child, lines };
+        if let Ok(first) = probe.lines.recv_timeout(Duration::from_secs(30)) {
+            assert_eq!(first, "ready");
+            return probe;
+        }
+        let _ = probe.child.kill();
+        let mut err = String::new();
+        if let Some(mut stderr) = probe.child.stderr.take() {
+            let _ = std::io::Read::read_to_string(&mut stderr, &mut err);
+        }
+        panic!("probe did not start: {err}");
     }
 
     /// The next frame line, waiting up to `timeout`.

@@ -40,7 +40,14 @@ fn main() {
     let args = Args::parse();
     iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let client = Client::connect(&args.service).unwrap_or_else(|e| {
-        eprintln!("dear-probe: {e}");
+        // The whole chain: the reason is in the sources.
+        let mut text = e.to_string();
+        let mut source = std::error::Error::source(&e);
+        while let Some(s) = source {
+            text.push_str(&format!(": {s}"));
+            source = s.source();
+        }
+        eprintln!("dear-probe: {text}");
         std::process::exit(2)
     });
     // Before the printing thread starts: it holds the stdout lock for its whole life.

@@ -1,0 +1,315 @@
+//! Issue 34: the transport's files under attack, by real processes on the real files of a
+//! running `deard` (trust model: docs/security.md).
+//!
+//! Most tests need root, as CI has: they give the iceoryx2 root to a group and run clients
+//! and attackers as `nobody` (uid 65534) in it, as a service's apps run in its group. Without
+//! root they say so and check nothing.
+
+use std::os::unix::fs::PermissionsExt;
+use std::os::unix::process::CommandExt;
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::Duration;
+
+use dear_e2e_tests::processes::{unique_service, Daemon, Probe};
+use dear_e2e_tests::scene;
+
+const W: u32 = 160;
+const H: u32 = 120;
+const WAIT: Duration = Duration::from_secs(30);
+/// The group and user the tests' clients run as.
+const NOBODY: u32 = 65534;
+
+fn is_root() -> bool {
+    // SAFETY: geteuid has no preconditions.
+    unsafe { libc::geteuid() == 0 }
+}
+
+/// A capture to replay and an iceoryx2 root for one test, in a directory every user may enter.
+struct Setup {
+    _tmp: tempfile::TempDir,
+    dir: PathBuf,
+    root: PathBuf,
+    capture: PathBuf,
+}
+
+/// The root is `0770`, its group `group` (the service's group: its members are clients).
+fn setup(group: u32) -> Setup {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().to_path_buf();
+    std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let root = dir.join("root");
+    std::fs::create_dir(&root).unwrap();
+    std::fs::set_permissions(&root, std::fs::Permissions::from_mode(0o770)).unwrap();
+    std::os::unix::fs::chown(&root, None, Some(group)).unwrap();
+    let capture = scene::write_capture(&dir.join("cap"), 10, W, H, scene::factory_calibration());
+    Setup {
+        capture: capture.root().to_path_buf(),
+        _tmp: tmp,
+        dir,
+        root,
+    }
+}
+
+impl Setup {
+    /// A looping replay, served until the test ends.
+    fn daemon(&self, service: &str, log: &str) -> Daemon {
+        let capture = self.capture.to_str().unwrap().to_string();
+        let args = ["--refine", "none", "--loop", "--replay", &capture];
+        Daemon::start_in(Some(&self.root), service, &args, &self.dir.join(log))
+    }
+
+    /// A client process as `uid` (with that user's group only), subscribed.
+    fn probe(&self, service: &str, uid: u32) -> Probe {
+        let mut command = Probe::command(service, 1_000_000, Duration::ZERO);
+        command
+            .env(dear_proto::IOX2_ROOT_ENV, &self.root)
+            .uid(uid)
+            .gid(uid);
+        Probe::spawn(command)
+    }
+
+    /// The files in the root whose names end with `suffix`.
+    fn files(&self, suffix: &str) -> Vec<PathBuf> {
+        std::fs::read_dir(&self.root)
+            .unwrap()
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.to_str().unwrap().ends_with(suffix))
+            .collect()
+    }
+}
+
+/// Runs `program args` as `nobody` and returns whether it succeeded, and its stderr.
+fn as_nobody(program: &str, args: &[&str]) -> (bool, String) {
+    let out = Command::new(program)
+        .args(args)
+        .uid(NOBODY)
+        .gid(NOBODY)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// Waits until `probe` has received `n` more frames; panics with the daemon's log if not.
+fn receives(probe: &Probe, n: usize, daemon: &mut Daemon) {
+    for k in 0..n {
+        if probe.next(WAIT).is_none() {
+            panic!(
+                "the client received {k} of {n} frames (daemon running: {}):\n{}",
+                daemon.is_running(),
+                daemon.log_text()
+            );
+        }
+    }
+}
+
+/// Defect 1 (the data segment): a member of the service's group wrote 152 random bytes into
+/// the publisher's `*.data` file and the daemon died with a general protection fault;
+/// `truncate -s0` killed it with SIGBUS. The segment is now written by the daemon only: the
+/// writes are refused, and the member's own client goes on receiving frames (it maps the
+/// segment read-only).
+#[test]
+fn a_client_cannot_write_or_truncate_the_frames() {
+    if !is_root() {
+        eprintln!("not root: cannot run clients as another user; not checked");
+        return;
+    }
+    let s = setup(NOBODY);
+    let service = unique_service("data-segment");
+    let mut daemon = s.daemon(&service, "deard.log");
+    daemon
+        .wait_for_log_line("serving", WAIT)
+        .expect("deard serves");
+    let probe = s.probe(&service, NOBODY);
+    receives(&probe, 5, &mut daemon);
+    let data = s.files(".data");
+    assert!(!data.is_empty(), "no data segment in {}", s.root.display());
+    for file in &data {
+        let path = file.to_str().unwrap();
+        let (ok, err) = as_nobody(
+            "dd",
+            &[
+                "if=/dev/urandom",
+                &format!("of={path}"),
+                "bs=152",
+                "count=1",
+                "seek=16",
+                "oflag=seek_bytes",
+                "conv=notrunc",
+            ],
+        );
+        assert!(!ok && err.contains("Permission denied"), "dd: {err}");
+        let (ok, err) = as_nobody("truncate", &["-s0", path]);
+        assert!(!ok && err.contains("Permission denied"), "truncate: {err}");
+        let mode = std::fs::metadata(file).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o644, "{path}");
+    }
+    receives(&probe, 20, &mut daemon);
+    assert!(daemon.is_running(), "{}", daemon.log_text());
+}
+
+/// Defect 9: a user outside the service's group is told so, not `UnableToGenerateUniqueNodeId`
+/// or `InsufficientPermissions` (the root `0770` is visible to it but cannot be entered).
+#[test]
+fn an_outsider_is_asked_whether_it_is_in_the_group() {
+    if !is_root() {
+        eprintln!("not root: cannot run a client as another user; not checked");
+        return;
+    }
+    let s = setup(0);
+    let service = unique_service("outsider");
+    let mut daemon = s.daemon(&service, "deard.log");
+    daemon
+        .wait_for_log_line("serving", WAIT)
+        .expect("deard serves");
+    let mut command = Probe::command(&service, 1, Duration::ZERO);
+    let out = command
+        .env(dear_proto::IOX2_ROOT_ENV, &s.root)
+        .uid(NOBODY)
+        .gid(NOBODY)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("is this user in the service's group?")
+            && err.contains(s.root.to_str().unwrap()),
+        "{err}"
+    );
+    assert!(daemon.is_running());
+}
+
+/// Defect 2: with the daemon stopped, a member replaced `$ROOT/nodes` by a symbolic link, and
+/// a root daemon then created a `0777` directory and `0666` files where it pointed. The daemon
+/// now removes links from its root before it creates anything there, and says so.
+#[test]
+fn a_symbolic_link_in_the_root_is_removed_not_followed() {
+    let s = setup(if is_root() {
+        NOBODY
+    } else {
+        unsafe { libc::getegid() }
+    });
+    let elsewhere = s.dir.join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    std::os::unix::fs::symlink(&elsewhere, s.root.join("nodes")).unwrap();
+    let service = unique_service("symlink");
+    let mut daemon = s.daemon(&service, "deard.log");
+    daemon
+        .wait_for_log_line("serving", WAIT)
+        .expect("deard serves");
+    let log = daemon.log_text();
+    assert!(
+        log.contains("removed a symbolic link from the iceoryx2 root") && log.contains("nodes"),
+        "{log}"
+    );
+    assert_eq!(
+        std::fs::read_dir(&elsewhere).unwrap().count(),
+        0,
+        "nothing created where the link pointed"
+    );
+    assert!(std::fs::symlink_metadata(s.root.join("nodes"))
+        .unwrap()
+        .is_dir());
+    let probe = Probe::spawn({
+        let mut c = Probe::command(&service, 1_000_000, Duration::ZERO);
+        c.env(dear_proto::IOX2_ROOT_ENV, &s.root);
+        c
+    });
+    receives(&probe, 3, &mut daemon);
+}
+
+/// Defect 3 (lock-out): 16 junk bytes in iceoryx2's node counter (`*global_mgmt`) made every
+/// later start fail with `UnableToGenerateUniqueNodeId` (the file not named). The daemon
+/// repairs it at start, and while it serves, naming the file.
+#[test]
+fn junk_in_the_node_counter_is_repaired_at_start_and_while_serving() {
+    let s = setup(if is_root() {
+        NOBODY
+    } else {
+        unsafe { libc::getegid() }
+    });
+    let service = unique_service("global-mgmt");
+    let mut first = s.daemon(&service, "first.log");
+    first
+        .wait_for_log_line("serving", WAIT)
+        .expect("deard serves");
+    assert!(first.terminate(WAIT).expect("stops").success());
+    let counters = s.files(".global_mgmt");
+    assert_eq!(counters.len(), 1, "{counters:?}");
+    let junk = [0x5Au8; 16];
+    std::fs::write(&counters[0], junk).unwrap();
+
+    let mut daemon = s.daemon(&service, "second.log");
+    daemon
+        .wait_for_log_line("serving", WAIT)
+        .unwrap_or_else(|| panic!("deard did not start:\n{}", daemon.log_text()));
+    let line = daemon
+        .wait_for_log_line("node counter was damaged", WAIT)
+        .unwrap();
+    assert!(line.contains(counters[0].to_str().unwrap()), "{line}");
+
+    // Again while it serves: repaired within a second, then new clients connect.
+    std::fs::write(&counters[0], junk).unwrap();
+    let deadline = std::time::Instant::now() + WAIT;
+    while daemon
+        .log_text()
+        .matches("node counter was damaged")
+        .count()
+        < 2
+    {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{}",
+            daemon.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let probe = Probe::spawn({
+        let mut c = Probe::command(&service, 1_000_000, Duration::ZERO);
+        c.env(dear_proto::IOX2_ROOT_ENV, &s.root);
+        c
+    });
+    receives(&probe, 3, &mut daemon);
+}
+
+/// Defect 7: after `rm -rf $ROOT/*` the daemon logged 15 fps forever while no new client
+/// could find the service. It now notices within a second, says which file went, makes the
+/// service again, and a new client receives frames.
+#[test]
+fn deleted_transport_files_are_noticed_and_made_again() {
+    let s = setup(if is_root() {
+        NOBODY
+    } else {
+        unsafe { libc::getegid() }
+    });
+    let service = unique_service("deleted");
+    let mut daemon = s.daemon(&service, "deard.log");
+    daemon
+        .wait_for_log_line("serving", WAIT)
+        .expect("deard serves");
+    for entry in std::fs::read_dir(&s.root).unwrap().flatten() {
+        let path = entry.path();
+        if entry.file_type().unwrap().is_dir() {
+            std::fs::remove_dir_all(&path).unwrap();
+        } else {
+            std::fs::remove_file(&path).unwrap();
+        }
+    }
+    let line = daemon
+        .wait_for_log_line("a file of the transport was deleted", WAIT)
+        .unwrap_or_else(|| panic!("not noticed:\n{}", daemon.log_text()));
+    assert!(line.contains(s.root.to_str().unwrap()), "{line}");
+    daemon
+        .wait_for_log_line("made the transport's files again", WAIT)
+        .unwrap_or_else(|| panic!("not made again:\n{}", daemon.log_text()));
+    let probe = Probe::spawn({
+        let mut c = Probe::command(&service, 1_000_000, Duration::ZERO);
+        c.env(dear_proto::IOX2_ROOT_ENV, &s.root);
+        c
+    });
+    receives(&probe, 3, &mut daemon);
+}
