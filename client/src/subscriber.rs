@@ -1,5 +1,6 @@
 //! Connecting to a frame service and waiting for frames.
 
+use std::os::unix::fs::MetadataExt;
 use std::time::{Duration, Instant};
 
 use dear_proto::service::{frame_event_service, frame_service};
@@ -92,6 +93,17 @@ pub enum ReceiveError {
         #[source]
         source: ListenerWaitError,
     },
+    /// A sample came from a publisher that does not belong to the owner of the iceoryx2 root
+    /// (the daemon's user, or root): another user of the service's group published on the
+    /// service first. The sample was dropped.
+    #[error("a frame from {service:?} was published by uid {uid} (pid {pid}), not by the owner of the iceoryx2 root {} (uid {owner}) or root: another user's process publishes on this service; its frames are refused", root.display())]
+    UntrustedPublisher {
+        service: String,
+        uid: u32,
+        pid: String,
+        owner: u32,
+        root: std::path::PathBuf,
+    },
     /// A sample arrived but is not a valid frame; it was dropped. Not fatal: the next one may
     /// be fine (`dear watch` counts these).
     #[error("frame from {service:?} rejected")]
@@ -117,6 +129,13 @@ pub struct Client {
     node: Node<Transport>,
     subscriber: Subscriber<Transport, [u8], FrameHeader>,
     listener: Listener<Transport>,
+    /// To look up which node published a sample.
+    frames: dear_proto::FrameService,
+    /// The iceoryx2 root and its owner: the user whose publishers are trusted (with root).
+    root: std::path::PathBuf,
+    root_owner: u32,
+    /// The last publisher found to be trusted (its port id).
+    trusted: std::cell::Cell<Option<u128>>,
 }
 
 impl Client {
@@ -129,10 +148,11 @@ impl Client {
             service: name(),
             source,
         })?;
-        create_root(&config).map_err(|source| ConnectError::RootDirectory {
+        let root = create_root(&config).map_err(|source| ConnectError::RootDirectory {
             service: name(),
             source,
         })?;
+        let root_owner = std::fs::metadata(&root).map(|m| m.uid()).unwrap_or(0);
         let node = NodeBuilder::new()
             .config(&config)
             // The application owns its signals; iceoryx2 must not install handlers of its own.
@@ -183,6 +203,10 @@ impl Client {
             node,
             subscriber,
             listener,
+            frames,
+            root,
+            root_owner,
+            trusted: std::cell::Cell::new(None),
         })
     }
 
@@ -191,7 +215,8 @@ impl Client {
         &self.service
     }
 
-    /// The next queued frame, if any, without waiting.
+    /// The next queued frame, if any, without waiting. A frame from a publisher of another user
+    /// than the root's owner (or root) is refused ([`ReceiveError::UntrustedPublisher`]).
     pub fn try_receive(&self) -> Result<Option<Frame>, ReceiveError> {
         let sample = self
             .subscriber
@@ -200,15 +225,63 @@ impl Client {
                 service: self.service.clone(),
                 source,
             })?;
-        match sample {
-            None => Ok(None),
-            Some(sample) => Frame::new(sample)
-                .map(Some)
-                .map_err(|source| ReceiveError::BadFrame {
-                    service: self.service.clone(),
-                    source,
-                }),
+        let Some(sample) = sample else {
+            return Ok(None);
+        };
+        self.check_publisher(sample.header().publisher_id())?;
+        Frame::new(sample)
+            .map(Some)
+            .map_err(|source| ReceiveError::BadFrame {
+                service: self.service.clone(),
+                source,
+            })
+    }
+
+    /// Whether `publisher` runs as the owner of the iceoryx2 root or as root: the owner of its
+    /// node's directory (`<root>/nodes/<node id>`, made by the publishing process). Issue 34:
+    /// a member of the service's group who started a publisher on the service before the
+    /// daemon had its frames received by every client. A publisher that has already left the
+    /// service cannot be checked; its last samples are accepted.
+    fn check_publisher(
+        &self,
+        publisher: iceoryx2::identifiers::UniquePublisherId,
+    ) -> Result<(), ReceiveError> {
+        if self.trusted.get() == Some(publisher.value()) {
+            return Ok(());
         }
+        let mut node = None;
+        self.frames.dynamic_config().list_publishers(|details| {
+            if details.publisher_id == publisher {
+                node = Some(details.node_id);
+                return CallbackProgression::Stop;
+            }
+            CallbackProgression::Continue
+        });
+        let untrusted = |uid: u32, pid: String| ReceiveError::UntrustedPublisher {
+            service: self.service.clone(),
+            uid,
+            pid,
+            owner: self.root_owner,
+            root: self.root.clone(),
+        };
+        // Gone from the service since (a daemon that was stopped or crashed): its last samples
+        // cannot be checked and are accepted, so a client sees a daemon's run to its end.
+        let Some(node) = node else {
+            return Ok(());
+        };
+        let pid = node
+            .pid::<Transport>()
+            .map(|p| p.value().to_string())
+            .unwrap_or_else(|_| "unknown".into());
+        let dir = self.root.join("nodes").join(node.value().to_string());
+        let uid = std::fs::symlink_metadata(&dir)
+            .map(|m| m.uid())
+            .unwrap_or(u32::MAX);
+        if uid == self.root_owner || uid == 0 {
+            self.trusted.set(Some(publisher.value()));
+            return Ok(());
+        }
+        Err(untrusted(uid, pid))
     }
 
     /// Waits up to `timeout` for a frame (event-driven: the thread sleeps until the daemon

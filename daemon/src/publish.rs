@@ -153,7 +153,7 @@ impl FramePublisher {
                 source,
             })?;
         let ports = open_ports(&config, &root, name, layout)?;
-        refuse_a_second_publisher(&ports.frames, ports.publisher.id(), name)?;
+        refuse_a_second_publisher(&root, &ports.frames, ports.publisher.id(), name)?;
         let run_id = dear_proto::random_run_id().map_err(|source| PublisherError::RunId {
             service: name.to_string(),
             source,
@@ -369,6 +369,7 @@ fn log_cleanup(state: iceoryx2::node::CleanupState, when: &str) {
 /// other and both refuse; one of them is restarted by its supervisor and finds the service
 /// free.
 fn refuse_a_second_publisher(
+    root: &std::path::Path,
     frames: &FrameService,
     own: iceoryx2::identifiers::UniquePublisherId,
     name: &str,
@@ -376,13 +377,21 @@ fn refuse_a_second_publisher(
     let mut others = Vec::new();
     frames.dynamic_config().list_publishers(|details| {
         if details.publisher_id != own {
-            others.push(
-                details
-                    .node_id
-                    .pid::<Transport>()
-                    .map(|pid| pid.value().to_string())
-                    .unwrap_or_else(|_| "unknown".into()),
-            );
+            let pid = details
+                .node_id
+                .pid::<Transport>()
+                .map(|pid| pid.value().to_string())
+                .unwrap_or_else(|_| "unknown".into());
+            // The user it runs as: the owner of its node's directory (issue 34: a member of
+            // the service's group can publish first; clients refuse its frames).
+            let node_dir = root.join("nodes").join(details.node_id.value().to_string());
+            match std::fs::symlink_metadata(&node_dir) {
+                Ok(meta) => others.push(format!(
+                    "{pid}, uid {}",
+                    std::os::unix::fs::MetadataExt::uid(&meta)
+                )),
+                Err(_) => others.push(pid),
+            }
         }
         CallbackProgression::Continue
     });
@@ -391,7 +400,7 @@ fn refuse_a_second_publisher(
     }
     Err(PublisherError::SecondPublisher {
         service: name.to_string(),
-        pids: others.join(", "),
+        pids: others.join("; "),
     })
 }
 

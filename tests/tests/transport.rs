@@ -313,3 +313,67 @@ fn deleted_transport_files_are_noticed_and_made_again() {
     });
     receives(&probe, 3, &mut daemon);
 }
+
+/// Defect 3 (impersonation): a member of the service's group who publishes on the service
+/// before the daemon had his frames received by every client. Clients now refuse frames of a
+/// publisher that does not run as the root's owner (or root), naming its uid; the real daemon
+/// still cannot start (it names the other publisher's pid and uid).
+#[test]
+fn frames_of_another_users_publisher_are_refused() {
+    if !is_root() {
+        eprintln!("not root: cannot run a publisher as another user; not checked");
+        return;
+    }
+    let s = setup(NOBODY);
+    let service = unique_service("impostor");
+    let mut impostor = Command::new(dear_e2e_tests::processes::binary("dear-impostor"))
+        .arg(&service)
+        .env(dear_proto::IOX2_ROOT_ENV, &s.root)
+        .uid(NOBODY)
+        .gid(NOBODY)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    struct Kill<'a>(&'a mut std::process::Child);
+    impl Drop for Kill<'_> {
+        fn drop(&mut self) {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(impostor.stdout.take().unwrap()),
+        &mut line,
+    )
+    .unwrap();
+    assert_eq!(line.trim(), "ready");
+    let _impostor = Kill(&mut impostor);
+
+    let mut daemon = s.daemon(&service, "deard.log");
+    let deadline = std::time::Instant::now() + WAIT;
+    while daemon.is_running() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{}",
+            daemon.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let log = daemon.log_text();
+    assert!(
+        log.contains("another process already publishes") && log.contains("uid 65534"),
+        "{log}"
+    );
+
+    let out = Probe::command(&service, 1, Duration::ZERO)
+        .env(dear_proto::IOX2_ROOT_ENV, &s.root)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("published by uid 65534") && err.contains("its frames are refused"),
+        "{err}"
+    );
+}
