@@ -122,6 +122,9 @@ pub struct OnlineConfig {
     /// Health: a proposed correction of at least this many px (or a held-back measurement
     /// beyond the gate) is "needs recalibration".
     pub health_recalibrate_px: f32,
+    /// Health: a frame whose edge disagreement (`1 − NCC` of RGB and warped-amplitude edges at
+    /// the published alignment) is at least this is "can improve": its edges barely line up.
+    pub health_max_disagreement: f32,
 }
 
 impl Default for OnlineConfig {
@@ -129,7 +132,10 @@ impl Default for OnlineConfig {
     /// 0.3–5 m, jumps confirmed by 3 measurements, residual trigger +25 % for 3 frames;
     /// `c` tracked between network frames with gain 0.7, peaks with NCC ≥ 0.1, ≤ 1 px/frame;
     /// measurements applied along directions known to ≤ 0.5 px; a prior known to 0.5 px;
-    /// health good up to 1 px, needs recalibration from 3 px (the gate).
+    /// health good up to 1 px, needs recalibration from 3 px (the gate), can improve from an
+    /// edge disagreement of 0.9 (read off `dear eval --online` on the simulator's sets, see
+    /// docs/calibration-health.md: aligned frames of six families are below it but for 1 in
+    /// 40, most frames misaligned by σ = 2–3 px at 320×240 above 0.85).
     fn default() -> Self {
         OnlineConfig {
             interval_frames: 30,
@@ -153,6 +159,7 @@ impl Default for OnlineConfig {
             prior_std_px: 0.5,
             health_good_px: 1.0,
             health_recalibrate_px: 3.0,
+            health_max_disagreement: 0.9,
         }
     }
 }
@@ -252,6 +259,12 @@ pub struct OnlineCalibrator {
     unobservable: usize,
     /// What the last admitted measurement constrained.
     last_observability: Option<Observability>,
+    /// The last frame's edge shift (`c` correction that best lines up its edges, relative to
+    /// the calibration that aligned it), px, when its peak was clear; `INFINITY` when the
+    /// peak was at the search window's border.
+    frame_shift_px: Option<f32>,
+    /// The last frame's edge check, as given.
+    frame_alignment: Option<EdgeAlignment>,
 }
 
 impl OnlineCalibrator {
@@ -284,6 +297,8 @@ impl OnlineCalibrator {
             prior: None,
             unobservable: 0,
             last_observability: None,
+            frame_shift_px: None,
+            frame_alignment: None,
         }
     }
 
@@ -350,6 +365,12 @@ impl OnlineCalibrator {
         aligned_with: Option<Calibration>,
     ) -> Option<Outcome> {
         let residual = alignment.map(|a| a.disagreement);
+        self.frame_alignment = alignment;
+        self.frame_shift_px = alignment.and_then(|a| a.shift).and_then(|shift| {
+            let clear = shift.peak_ncc >= self.config.track_min_ncc;
+            let px = shift.du.hypot(shift.dv);
+            (clear && px.is_finite()).then_some(if shift.at_limit { f32::INFINITY } else { px })
+        });
         let outcome = measurement.map(|m| self.observe(m));
         if !self.this_frame_network {
             self.track(alignment, aligned_with);
@@ -669,16 +690,22 @@ impl OnlineCalibrator {
     /// - **unknown** without an estimate;
     /// - **needs recalibration** while `≥ 2` mutually consistent measurements beyond the gate
     ///   are held back (a jump half confirmed; one wild frame is never enough), or when the
-    ///   recent evidence proposes a correction of `health_recalibrate_px` or more;
-    /// - **can improve** when it proposes `health_good_px` or more, when some direction of the
-    ///   estimate is known only to worse than `health_good_px` (no prior and no frame
-    ///   constrained it yet), or while the alignment residual is above its trigger level;
+    ///   recent evidence or the frame's own edge check proposes a correction of
+    ///   `health_recalibrate_px` or more (an edge shift at the border of its search window
+    ///   counts as beyond it);
+    /// - **can improve** when it proposes `health_good_px` or more, when the frame's edges line
+    ///   up best at the border of the shift search (however weakly) or barely at all
+    ///   (disagreement ≥ `health_max_disagreement`), when some direction of the estimate is
+    ///   known only to worse than `health_good_px` (no prior and no frame constrained it yet),
+    ///   or while the alignment residual is above its trigger level;
     /// - **good** otherwise.
     ///
-    /// The *proposed correction* is the flow distance from the estimate to the per-parameter
-    /// median of the last three accepted (projected) measurements: what the recent evidence
-    /// says, robust to one wild measurement as the estimate is, and ahead of the estimate
-    /// (the median of the whole window) when the calibration moves.
+    /// The *proposed correction* is the larger of the flow distance from the estimate to the
+    /// per-parameter median of the last three accepted (projected) measurements — what the
+    /// recent evidence says, robust to one wild measurement as the estimate is, and ahead of
+    /// the estimate (the median of the whole window) when the calibration moves — and the
+    /// last frame's edge shift ([`crate::online::EdgeShift`], when its peak is clear: NCC ≥
+    /// `track_min_ncc`): how far that frame's own edges say its alignment is off in `c`.
     pub fn health(&self) -> HealthReport {
         let info = self.information();
         let uncertainty_px = info.observability(self.config.health_good_px).worst_std_px;
@@ -698,12 +725,14 @@ impl OnlineCalibrator {
             }
             _ => None,
         };
-        let correction_px = proposed_px.max(held_back_px.unwrap_or(0.0));
+        let frame_px = self.frame_shift_px.unwrap_or(0.0);
+        let correction_px = proposed_px.max(held_back_px.unwrap_or(0.0)).max(frame_px);
         let state = if self.estimate.is_none() {
             CalibrationHealth::Unknown
         } else if held_back_px.is_some() || correction_px >= self.config.health_recalibrate_px {
             CalibrationHealth::NeedsRecalibration
         } else if correction_px >= self.config.health_good_px
+            || self.frame_disagrees()
             || uncertainty_px.is_nan()
             || uncertainty_px > self.config.health_good_px
             || self.residual_high_frames >= self.config.residual_trigger_frames
@@ -718,7 +747,18 @@ impl OnlineCalibrator {
             uncertainty_px,
             constrained: self.last_observability.map_or(4, |o| o.constrained),
             held_back: self.pending.len(),
+            frame_alignment: self.frame_alignment,
         }
+    }
+
+    /// Whether the last frame's own edges say its alignment is off without saying by how
+    /// much: they line up best at the border of the shift search however weakly (beyond the
+    /// window), or they barely line up at all (`health_max_disagreement`).
+    fn frame_disagrees(&self) -> bool {
+        self.frame_alignment.is_some_and(|a| {
+            a.disagreement >= self.config.health_max_disagreement
+                || a.shift.is_some_and(|s| s.at_limit)
+        })
     }
 
     /// Frames since the estimate last changed (0 on the frame it changed), `None` before any.
@@ -745,10 +785,10 @@ const RECENT_MEASUREMENTS: usize = 3;
 pub struct HealthReport {
     /// Good / can improve / needs recalibration (unknown without an estimate).
     pub state: CalibrationHealth,
-    /// The larger of the correction the recent evidence proposes (the median of the last
-    /// three accepted measurements against the estimate) and, with two or more held back, the
-    /// last held-back measurement's distance from the estimate; px of flow over the depth
-    /// range.
+    /// The largest of the correction the recent evidence proposes (the median of the last
+    /// three accepted measurements against the estimate), the last frame's clear edge shift
+    /// (∞ at the search window's border) and, with two or more held back, the last held-back
+    /// measurement's distance from the estimate; px of flow over the depth range.
     pub correction_px: f32,
     /// Standard deviation of the estimate along its worst-known direction, px (∞ when some
     /// direction has never been constrained).
@@ -758,6 +798,8 @@ pub struct HealthReport {
     pub constrained: u8,
     /// Measurements held back by the gate, waiting for the confirmation of a jump.
     pub held_back: usize,
+    /// The last frame's edge check (diagnostics).
+    pub frame_alignment: Option<EdgeAlignment>,
 }
 
 /// Per-parameter median of the measurements (upper median for an even count,
@@ -1530,5 +1572,59 @@ mod tests {
             est.end_frame(None, residual(0.8));
         }
         assert_eq!(est.health().state, CalibrationHealth::CanImprove);
+        // The frame's own edges: a clear 1.5 px shift says can improve, one at the border of
+        // the search window needs recalibration, an unclear peak says nothing.
+        let mut est = OnlineCalibrator::with_prior(
+            OnlineConfig {
+                interval_frames: 1000,
+                track_gain: 0.0,
+                ..config
+            },
+            TRUE,
+        );
+        for _ in 0..3 {
+            est.begin_frame();
+            est.end_frame(Some(Ok(observed(TRUE, &[0.3, 0.6, 1.2]))), None);
+        }
+        let frame = |est: &mut OnlineCalibrator, a: Option<EdgeAlignment>| {
+            est.begin_frame();
+            est.end_frame(None, a);
+            est.health().state
+        };
+        assert_eq!(
+            frame(&mut est, shifted(0.3, 0.2, 0.5)),
+            CalibrationHealth::Good
+        );
+        assert_eq!(
+            frame(&mut est, shifted(1.5, 0.0, 0.5)),
+            CalibrationHealth::CanImprove
+        );
+        assert_eq!(
+            frame(&mut est, shifted(1.5, 0.0, 0.05)),
+            CalibrationHealth::Good
+        );
+        let mut at_limit = shifted(3.0, 0.0, 0.5);
+        if let Some(s) = at_limit.as_mut().and_then(|a| a.shift.as_mut()) {
+            s.at_limit = true;
+        }
+        assert_eq!(
+            frame(&mut est, at_limit),
+            CalibrationHealth::NeedsRecalibration
+        );
+        // At the border with an unclear peak, or edges that barely line up: can improve.
+        let mut weak_limit = shifted(3.0, 0.0, 0.02);
+        if let Some(s) = weak_limit.as_mut().and_then(|a| a.shift.as_mut()) {
+            s.at_limit = true;
+        }
+        assert_eq!(frame(&mut est, weak_limit), CalibrationHealth::CanImprove);
+        let mut uncorrelated = shifted(0.2, 0.0, 0.5);
+        if let Some(a) = uncorrelated.as_mut() {
+            a.disagreement = 0.95;
+        }
+        assert_eq!(frame(&mut est, uncorrelated), CalibrationHealth::CanImprove);
+        assert_eq!(
+            frame(&mut est, shifted(0.2, 0.0, 0.5)),
+            CalibrationHealth::Good
+        );
     }
 }
