@@ -48,6 +48,9 @@ packages=(build-essential pkg-config libclang1)
 # calls against the unit's filter) and the system python3's numpy (it runs a Python app as
 # another user, who cannot reach the checkout's .venv).
 $rust_only || packages+=(python3-venv strace python3-numpy)
+# The browser test of `dear view` (tests/scripts/view_browser.py): Debian's Chromium and its
+# chromedriver (about 350 MB installed).
+$rust_only || packages+=(chromium chromium-driver)
 # Cross-building for aarch64 (linker, the target's C library and headers for -sys crates),
 # running its binaries here (qemu-user: qemu-aarch64 -L /usr/aarch64-linux-gnu), and building
 # .deb packages (dpkg-dev: dpkg-shlibdeps for their dependencies; binutils for strip).
