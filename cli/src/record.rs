@@ -1,8 +1,8 @@
 //! `dear record --mcap FILE`: received frames written to an MCAP file that Foxglove, Rerun
 //! and the `mcap` tools open (issue 15).
 //!
-//! Per frame, one message on each of four channels named after the service (`dear/cam0/frames`
-//! → `/dear/cam0/…`), all with Foxglove's well-known schemas, protobuf-encoded:
+//! Per frame, one message on each of five channels named after the service (`dear/cam0/frames`
+//! → `/dear/cam0/…`), the first four with Foxglove's well-known schemas, protobuf-encoded:
 //! - `…/depth`: `foxglove.RawImage`, `16UC1` millimetres (default) or `32FC1` metres, 0 = invalid;
 //! - `…/rgb`: `foxglove.RawImage`, `rgb8`;
 //! - `…/confidence`: `foxglove.RawImage`, `mono8` (0 = invalid … 255 = measured and kept);
@@ -12,7 +12,10 @@
 //!   frame's width and height, and K, R, P from `--intrinsics` (pinhole, `plumb_bob` with zero
 //!   distortion: the model of the DEAR pipeline) or, without it, all zero: the ROS/Foxglove
 //!   convention for an uncalibrated camera, which viewers ignore instead of projecting with
-//!   made-up numbers.
+//!   made-up numbers;
+//! - `…/calibration_health`: JSON (schema `dear.CalibrationHealth`, `mcap_file::HEALTH_SCHEMA`)
+//!   with the header's flow-model calibration, its fit figures and its health state (good /
+//!   can improve / needs recalibration, docs/calibration-health.md).
 //!
 //! Every message's `frame_id` is the camera's name (`cam0`), its `timestamp` the frame's
 //! capture time; the MCAP log time is the capture time too (moved on where the capture clock

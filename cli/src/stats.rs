@@ -59,6 +59,11 @@ pub struct CalibrationReport {
     pub residual_px: Option<f32>,
     pub quality: f32,
     pub age_frames: u32,
+    /// Calibration health (docs/calibration-health.md): `"unknown"`, `"good"`, `"can improve"`
+    /// or `"needs recalibration"`.
+    pub health: &'static str,
+    /// Directions of `(t, c)` the last measurement's frame constrained, 0–4.
+    pub constrained: u8,
 }
 
 /// One line of `dear watch`.
@@ -198,6 +203,8 @@ impl Window {
                 residual_px: Some(h.calib_residual_px).filter(|r| r.is_finite()),
                 quality: h.calib_quality,
                 age_frames: h.calib_age_frames,
+                health: h.calibration_health().name(),
+                constrained: h.calib_constrained,
             }),
             flags: last.map(|h| flag_names(h.flags)).unwrap_or_default(),
             bundle: last
@@ -296,8 +303,9 @@ impl fmt::Display for Report {
                 .map_or_else(|| "-".to_string(), |r| format!("{r:.2}"));
             write!(
                 f,
-                " | calib tx {:.2} ty {:.2} cx {:.2} cy {:.2} res {residual} q {:.2} age {}",
-                c.tx, c.ty, c.cx, c.cy, c.quality, c.age_frames
+                " | calib tx {:.2} ty {:.2} cx {:.2} cy {:.2} res {residual} q {:.2} age {} \
+                 health {} ({}/4 seen)",
+                c.tx, c.ty, c.cx, c.cy, c.quality, c.age_frames, c.health, c.constrained
             )?;
         }
         let flags = if self.flags.is_empty() {
@@ -407,6 +415,8 @@ mod tests {
         b.calib_residual_px = 0.4;
         b.calib_quality = 0.9;
         b.calib_age_frames = 7;
+        b.calib_health = 2;
+        b.calib_constrained = 3;
         b.flags = flags::ALIGNED | flags::REFINED_NETWORK | flags::CALIBRATION_ONLINE;
         b.set_bundle_name("edge");
         w.push(&b, 0);
@@ -418,6 +428,7 @@ mod tests {
         let c = r.calibration.clone().unwrap();
         assert_eq!((c.tx, c.cy, c.residual_px), (12.5, -1.25, Some(0.4)));
         assert_eq!((c.quality, c.age_frames), (0.9, 7));
+        assert_eq!((c.health, c.constrained), ("can improve", 3));
         assert_eq!(r.flags, ["aligned", "refined-network", "online"]);
         assert_eq!(r.bundle.as_deref(), Some("edge"));
         let line = r.to_string();
@@ -425,6 +436,7 @@ mod tests {
             "#2 ",
             "1.0 fps",
             "calib tx 12.50 ty 0.00 cx 0.00 cy -1.25 res 0.40 q 0.90 age 7",
+            "health can improve (3/4 seen)",
             "aligned+refined-network+online (edge)",
             "skipped 3 (+1) dropped 9 (+4)",
             "rejected 1",

@@ -22,7 +22,7 @@ use dear_pipeline::filter::ClassicalRefiner;
 use dear_pipeline::geometry::LsqError;
 use dear_pipeline::model::{BundleError, ModelBundle};
 use dear_pipeline::online::{Measurement, NetworkTicket, OnlineCalibrator, OnlineConfig};
-use dear_proto::{flags, FrameHeader, Stage};
+use dear_proto::{flags, CalibrationHealth, FrameHeader, Stage};
 use ndarray::{Array2, ArrayViewMut2, ArrayViewMut3};
 
 use crate::config::{CalibrationMode, NetworkPlacement, PipelineConfig, RefineMode};
@@ -216,11 +216,16 @@ impl Processor {
         };
         let chain = prepare()?;
         let online = match config.calibration {
-            CalibrationMode::Online => Some(OnlineCalibrator::new(OnlineConfig {
-                interval_frames: config.online_interval_frames,
-                track_gain: config.online_track_gain,
-                ..OnlineConfig::default()
-            })),
+            // The static calibration is the prior: measurements move it only along the
+            // directions their frames constrain (issue 32).
+            CalibrationMode::Online => Some(OnlineCalibrator::with_prior(
+                OnlineConfig {
+                    interval_frames: config.online_interval_frames,
+                    track_gain: config.online_track_gain,
+                    ..OnlineConfig::default()
+                },
+                calibration,
+            )),
             CalibrationMode::EveryFrame => None,
         };
         let background = match (&online, config.online_network) {
@@ -443,6 +448,8 @@ impl Processor {
                 header.calib_residual_px = f32::NAN;
                 header.calib_quality = 0.0;
                 header.calib_age_frames = 0;
+                header.calib_health = CalibrationHealth::Unknown.code();
+                header.calib_constrained = 0;
                 header.flags = flags::ALIGNED;
                 let t = Instant::now();
                 match refiner {
@@ -628,6 +635,9 @@ impl Publish<'_> {
                     .unwrap_or(self.static_calibration);
                 set_calibration(header, calibration);
                 header.calib_quality = online.quality();
+                let health = online.health();
+                header.calib_health = health.state.code();
+                header.calib_constrained = health.constrained;
                 header.calib_age_frames = online
                     .frames_since_estimate()
                     .map_or(u32::MAX, |f| f.min(u32::MAX as u64) as u32);
@@ -639,6 +649,20 @@ impl Publish<'_> {
                 );
                 header.calib_quality = fit.map_or(0.0, |m| m.fit_quality());
                 header.calib_age_frames = 0;
+                // Every frame is fitted on its own: good when its frame constrains every
+                // direction, can improve when it does not (some of the published calibration
+                // is then the fit's starting point, not a measurement).
+                let observability = fit.map(|m| {
+                    m.observability(OnlineConfig::default().max_direction_std_px)
+                        .constrained
+                });
+                header.calib_constrained = observability.unwrap_or(0);
+                header.calib_health = match observability {
+                    None => CalibrationHealth::Unknown,
+                    Some(4) => CalibrationHealth::Good,
+                    Some(_) => CalibrationHealth::CanImprove,
+                }
+                .code();
             }
         }
         header.calib_residual_px = fit.and_then(|m| m.residual_px()).unwrap_or(f32::NAN);

@@ -103,6 +103,63 @@ fn overlapped_frames_are_published_and_a_bad_next_frame_is_refused_by_name() {
     assert_eq!(header.frame_id, 2);
 }
 
+/// Issue 32: every DEAR frame's header carries a calibration health state. With the static
+/// calibration as the estimator's prior it is assessed from the first frame (never "unknown"),
+/// a valid code, and the constrained-direction count is at most 4; the static engine says
+/// "unknown".
+#[test]
+fn every_frame_carries_a_calibration_health_state() {
+    use dear_proto::CalibrationHealth;
+    let capture = CaptureDir::open(root().join("samples/demo")).unwrap();
+    let (w, h) = capture.size();
+    let frames: Vec<RgbdFrame> = (0..4).map(|p| capture.read_frame(p).unwrap()).collect();
+    let (hu, wu) = (h as usize, w as usize);
+    for calibration in [
+        deard::config::CalibrationMode::Online,
+        deard::config::CalibrationMode::EveryFrame,
+    ] {
+        let config = PipelineConfig {
+            refine: RefineMode::Dear,
+            bundle: root().join("fixtures/bundles/smoke-edge"),
+            calibration,
+            ..PipelineConfig::default()
+        };
+        let mut processor =
+            Processor::from_config(w, h, capture.manifest().initial_calibration, &config).unwrap();
+        let mut seen = Vec::new();
+        for frame in &frames {
+            let mut planes = Planes::new(hu, wu);
+            let mut header = FrameHeader::new(frame.index, w, h);
+            processor
+                .process_into(frame, &mut header, planes.output())
+                .unwrap();
+            assert!(header.calib_health <= 3, "{}", header.calib_health);
+            assert!(header.calib_constrained <= 4);
+            seen.push(header.calibration_health());
+        }
+        if calibration == deard::config::CalibrationMode::Online {
+            assert!(
+                seen.iter().all(|&s| s != CalibrationHealth::Unknown),
+                "{calibration:?}: {seen:?}"
+            );
+        }
+    }
+    let config = PipelineConfig {
+        refine: RefineMode::Classical,
+        ..PipelineConfig::default()
+    };
+    let mut processor =
+        Processor::from_config(w, h, capture.manifest().initial_calibration, &config).unwrap();
+    let mut planes = Planes::new(hu, wu);
+    let mut header = FrameHeader::new(0, w, h);
+    header.calib_health = 9;
+    processor
+        .process_into(&frames[0], &mut header, planes.output())
+        .unwrap();
+    assert_eq!(header.calibration_health(), CalibrationHealth::Unknown);
+    assert_eq!(header.calib_health, 0);
+}
+
 /// A guarded bundle's frames say their confidence is an expected-error code (flag bit 6), with
 /// code 0 exactly where no depth is published; the shipped hybrid bundle's frames do not.
 #[test]

@@ -25,7 +25,7 @@ use dear_pipeline::evaluate::{
 };
 use dear_pipeline::metrics::aepe;
 use dear_pipeline::model::ModelBundle;
-use dear_pipeline::online::{OnlineCalibrator, OnlineConfig};
+use dear_pipeline::online::{HealthReport, OnlineCalibrator, OnlineConfig};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
@@ -133,11 +133,15 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         track_gain: args.online_track_gain,
         ..OnlineConfig::default()
     };
+    // The capture's static calibration is the prior, as the daemon's (issue 32).
     let mut online: Vec<(OnlineCalibrator, usize)> = bundles
         .iter()
-        .map(|_| (OnlineCalibrator::new(online_config), 0))
+        .map(|_| (OnlineCalibrator::with_prior(online_config, initial), 0))
         .collect();
-    let mut tracking = String::from("frame,method,aepe_px,flow_network\n");
+    let mut tracking = String::from(
+        "frame,method,aepe_px,flow_network,health,constrained,correction_px,uncertainty_px,\
+         held_back,disagreement,shift_px,shift_ncc,shift_at_limit\n",
+    );
     let positions = select(capture.len(), args.frames);
     let figure_positions: Vec<usize> = select(positions.len(), Some(args.figures))
         .into_iter()
@@ -170,20 +174,43 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         let frame = &sample.frame;
         let valid = ground_truth_mask(&sample)?;
         let truth = ground_truth_flow(&sample);
-        let mut add = |name: &str, out: &MethodOutput, network: Option<bool>| {
+        let mut add = |name: &str,
+                       out: &MethodOutput,
+                       network: Option<bool>,
+                       health: Option<HealthReport>| {
             eval.add(name, &sample, out, valid.view(), truth.as_ref());
             if let (true, Some(flow), Some(truth)) = (args.online, &out.flow, &truth) {
                 let error = aepe(flow, truth, valid.view()).unwrap_or(f64::NAN);
                 let network = network.map_or(String::new(), |n| u8::from(n).to_string());
-                tracking.push_str(&format!("{id},{name},{error:.4},{network}\n"));
+                let health = health.map_or_else(
+                    || ",,,,,,,,".to_string(),
+                    |h| {
+                        let a = h.frame_alignment;
+                        let shift = a.and_then(|a| a.shift);
+                        format!(
+                            "{},{},{:.4},{:.4},{},{},{},{},{}",
+                            h.state.name(),
+                            h.constrained,
+                            h.correction_px,
+                            h.uncertainty_px,
+                            h.held_back,
+                            a.map_or(String::new(), |a| format!("{:.4}", a.disagreement)),
+                            shift.map_or(String::new(), |s| format!("{:.3}", s.du.hypot(s.dv))),
+                            shift.map_or(String::new(), |s| format!("{:.3}", s.peak_ncc)),
+                            shift.map_or(String::new(), |s| u8::from(s.at_limit).to_string()),
+                        )
+                    },
+                );
+                tracking.push_str(&format!("{id},{name},{error:.4},{network},{health}\n"));
             }
         };
+
         // The figures show the first bundle's output, else the classical pipeline's.
         let mut shown: Option<(String, ndarray::Array2<f32>)> = None;
         let mut bundle_shown = false;
         for &method in &classical {
             if let Some(out) = runner.run(method, &sample) {
-                add(method.name(), &out, None);
+                add(method.name(), &out, None, None);
                 if method == Method::StaticClassical || shown.is_none() {
                     shown = Some((method.name().to_string(), out.depth));
                 }
@@ -193,8 +220,8 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             let name = b.name().to_string();
             match b.run(frame) {
                 Ok(o) => {
-                    add(&format!("{name} aligned"), &o.aligned, None);
-                    add(&name, &o.refined, Some(true));
+                    add(&format!("{name} aligned"), &o.aligned, None, None);
+                    add(&name, &o.refined, Some(true), None);
                     if !bundle_shown {
                         shown = Some((name.clone(), o.refined.depth));
                         bundle_shown = true;
@@ -208,7 +235,12 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             }
             if let Some(result) = b.run_refine_only(&sample) {
                 match result {
-                    Ok(out) => add(&format!("{name} refine @ true calibration"), &out, None),
+                    Ok(out) => add(
+                        &format!("{name} refine @ true calibration"),
+                        &out,
+                        None,
+                        None,
+                    ),
                     Err(e) => skipped.push(format!("frame {id}: bundle {name} refine-only: {e}")),
                 }
             }
@@ -220,6 +252,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
                             &format!("{name} online"),
                             &out,
                             Some(report.ran_flow_network),
+                            Some(calibrator.health()),
                         );
                     }
                     Err(e) => skipped.push(format!("frame {id}: bundle {name} online: {e}")),

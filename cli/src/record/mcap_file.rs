@@ -55,6 +55,8 @@ pub struct Topics {
     pub rgb: String,
     pub confidence: String,
     pub calibration: String,
+    /// The header's flow-model calibration and its health (JSON, [`HEALTH_SCHEMA`]).
+    pub calibration_health: String,
     /// `frame_id` of every message: the camera's name.
     pub frame_id: String,
 }
@@ -73,6 +75,7 @@ impl Topics {
             rgb: topic("rgb"),
             confidence: topic("confidence"),
             calibration: topic("calibration"),
+            calibration_health: topic("calibration_health"),
             frame_id,
         }
     }
@@ -169,12 +172,38 @@ pub struct Recorder<W: Write + Seek> {
     rgb_channel: u16,
     confidence_channel: u16,
     calibration_channel: u16,
+    health_channel: u16,
     clock: LogClock,
     losses: Losses,
     frames: u64,
     saturated_pixels: u64,
     buf: Vec<u8>,
 }
+
+/// JSON schema of the `calibration_health` messages: per frame, the header's flow-model
+/// calibration `W = t/z + c` with its fit figures and health state (docs/calibration-health.md).
+pub const HEALTH_SCHEMA: &str = r#"{
+  "title": "dear.CalibrationHealth",
+  "type": "object",
+  "properties": {
+    "timestamp": {"type": "object", "description": "capture time",
+      "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}},
+    "frame_id": {"type": "string"},
+    "sequence": {"type": "integer"},
+    "health": {"type": "string",
+      "enum": ["unknown", "good", "can improve", "needs recalibration"]},
+    "health_code": {"type": "integer", "description": "0 unknown, 1 good, 2 can improve, 3 needs recalibration"},
+    "constrained_directions": {"type": "integer", "description": "directions of (t_x, t_y, c_x, c_y) the last measurement constrained, 0-4"},
+    "t_x": {"type": "number", "description": "px·m"},
+    "t_y": {"type": "number", "description": "px·m"},
+    "c_x": {"type": "number", "description": "px"},
+    "c_y": {"type": "number", "description": "px"},
+    "residual_px": {"type": ["number", "null"]},
+    "quality": {"type": "number"},
+    "age_frames": {"type": "integer"},
+    "online": {"type": "boolean"}
+  }
+}"#;
 
 /// What the `CameraCalibration` messages say without `--intrinsics`.
 pub const NO_INTRINSICS_NOTE: &str = "uncalibrated: K, R and P all zero (the ROS and Foxglove \
@@ -211,6 +240,13 @@ impl<W: Write + Seek> Recorder<W> {
                 &calibration_schema.data,
             )
             .with_context(context)?;
+        let health_schema = writer
+            .add_schema(
+                "dear.CalibrationHealth",
+                "jsonschema",
+                HEALTH_SCHEMA.as_bytes(),
+            )
+            .with_context(context)?;
         let topics = Topics::for_service(service);
         let encoding = RawImage::get_message_encoding();
         let mut channel = |schema: u16, topic: &str, meta: &[(&str, &str)]| {
@@ -242,6 +278,22 @@ impl<W: Write + Seek> Recorder<W> {
             )],
         )?;
         let calibration_channel = channel(calibration, &topics.calibration, &[])?;
+        let health_channel = {
+            let metadata: BTreeMap<String, String> = [
+                ("dear.service".to_string(), service.to_string()),
+                (
+                    "dear.content".to_string(),
+                    "the header's flow-model calibration W = t/z + c and its health \
+                     (docs/calibration-health.md)"
+                        .to_string(),
+                ),
+            ]
+            .into_iter()
+            .collect();
+            writer
+                .add_channel(health_schema, &topics.calibration_health, "json", &metadata)
+                .with_context(context)?
+        };
         Ok(Recorder {
             writer,
             path: path.to_path_buf(),
@@ -253,6 +305,7 @@ impl<W: Write + Seek> Recorder<W> {
             rgb_channel,
             confidence_channel,
             calibration_channel,
+            health_channel,
             clock: LogClock::default(),
             losses: Losses::default(),
             frames: 0,
@@ -349,6 +402,10 @@ impl<W: Write + Seek> Recorder<W> {
             .encode(&mut self.buf)
             .context("cannot encode a foxglove.CameraCalibration")?;
         self.write(self.calibration_channel, &message, h.sequence)?;
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, &health_message(h, &self.topics.frame_id))
+            .context("cannot encode a calibration health message")?;
+        self.write(self.health_channel, &message, h.sequence)?;
         self.frames += 1;
         Ok(())
     }
@@ -462,6 +519,30 @@ fn timestamp(ns: u64) -> Timestamp {
     Timestamp::new(sec, (ns % 1_000_000_000) as u32)
 }
 
+/// The `calibration_health` message of a frame ([`HEALTH_SCHEMA`]).
+fn health_message(h: &FrameHeader, frame_id: &str) -> serde_json::Value {
+    let health = h.calibration_health();
+    serde_json::json!({
+        "timestamp": {
+            "sec": h.capture_timestamp_ns / 1_000_000_000,
+            "nsec": h.capture_timestamp_ns % 1_000_000_000,
+        },
+        "frame_id": frame_id,
+        "sequence": h.sequence,
+        "health": health.name(),
+        "health_code": health.code(),
+        "constrained_directions": h.calib_constrained,
+        "t_x": h.calib_tx,
+        "t_y": h.calib_ty,
+        "c_x": h.calib_cx,
+        "c_y": h.calib_cy,
+        "residual_px": Some(h.calib_residual_px).filter(|r| r.is_finite()),
+        "quality": h.calib_quality,
+        "age_frames": h.calib_age_frames,
+        "online": h.flags & dear_proto::flags::CALIBRATION_ONLINE != 0,
+    })
+}
+
 /// The RGB camera's calibration message. deard publishes no intrinsics — the header's
 /// `calib_*` fields are the depth-to-RGB flow model `W = t/z + c`, not a camera matrix — so
 /// K, R and P come from `--intrinsics` (a pinhole without distortion, the model the DEAR
@@ -567,7 +648,7 @@ mod tests {
     }
 
     #[test]
-    fn a_recording_has_four_channels_and_a_summary() {
+    fn a_recording_has_five_channels_and_a_summary() {
         let depth = [0.0, 1.0, 2.5, 0.0, 0.25, 3.0, 0.0, 4.0];
         let rgb = [7u8; 24];
         let confidence = [0, 255, 200, 0, 255, 255, 0, 100];
@@ -580,7 +661,10 @@ mod tests {
         )
         .unwrap();
         for (seq, t) in [(0, 10), (1, 20), (3, 30)] {
-            let h = header(seq, t);
+            let mut h = header(seq, t);
+            h.calib_health = dear_proto::CalibrationHealth::CanImprove.code();
+            h.calib_constrained = 2;
+            h.calib_cx = 1.5;
             rec.add(&FrameData {
                 header: &h,
                 depth: &depth,
@@ -594,9 +678,26 @@ mod tests {
         let bytes = out.into_inner();
         let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
         let topics: Vec<_> = summary.channels.values().map(|c| c.topic.clone()).collect();
-        assert_eq!(topics.len(), 4, "{topics:?}");
+        assert_eq!(topics.len(), 5, "{topics:?}");
         let stats = summary.stats.expect("statistics");
-        assert_eq!(stats.message_count, 12);
+        assert_eq!(stats.message_count, 15);
+        // The calibration health channel: JSON per frame with the header's state.
+        let health = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(Result::unwrap)
+            .find(|m| m.channel.topic == "/dear/cam0/calibration_health")
+            .unwrap();
+        assert_eq!(health.channel.message_encoding, "json");
+        let schema = health.channel.schema.as_ref().unwrap();
+        assert_eq!(
+            (schema.name.as_str(), schema.encoding.as_str()),
+            ("dear.CalibrationHealth", "jsonschema")
+        );
+        let v: serde_json::Value = serde_json::from_slice(&health.data).unwrap();
+        assert_eq!(v["health"], "can improve");
+        assert_eq!(v["health_code"], 2);
+        assert_eq!(v["constrained_directions"], 2);
+        assert_eq!(v["c_x"], 1.5);
         let depth_image = mcap::MessageStream::new(&bytes)
             .unwrap()
             .map(Result::unwrap)
