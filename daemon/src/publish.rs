@@ -170,12 +170,15 @@ impl FramePublisher {
         })
     }
 
-    /// Checks the transport's files (called every second by the daemon): repairs a damaged
-    /// node counter, and when a file new clients need was deleted (`rm -rf` of the root, a
+    /// Checks the transport's files (called every second by the daemon): removes symbolic links
+    /// from the root, repairs a damaged node counter, and when a file new clients need was deleted (`rm -rf` of the root, a
     /// tmpfs cleaner), makes the service again under the same run id, logging why. Running
     /// clients keep the old files mapped and stop receiving; new clients (and clients that
     /// connect again) find the new service.
     pub fn check_transport(&self) {
+        // A link swapped in while serving: iceoryx2 would follow it when it makes or removes
+        // a node's directory (a client joining or a dead one cleaned up).
+        transport_guard::remove_symlinks(&self.root);
         transport_guard::repair_global_mgmt(&self.root);
         let mut ports = self.ports.borrow_mut();
         if let Some(p) = ports.as_ref() {

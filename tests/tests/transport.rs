@@ -220,6 +220,24 @@ fn a_symbolic_link_in_the_root_is_removed_not_followed() {
         c
     });
     receives(&probe, 3, &mut daemon);
+
+    // One swapped in while the daemon serves is removed within a second too.
+    let link = s.root.join("services").join("iox2_swapped.service");
+    std::os::unix::fs::symlink(&elsewhere, &link).unwrap();
+    let deadline = std::time::Instant::now() + WAIT;
+    while std::fs::symlink_metadata(&link).is_ok() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{}",
+            daemon.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let line = daemon
+        .wait_for_log_line("iox2_swapped.service", WAIT)
+        .unwrap();
+    assert!(line.contains("removed a symbolic link"), "{line}");
+    receives(&probe, 3, &mut daemon);
 }
 
 /// Defect 3 (lock-out): 16 junk bytes in iceoryx2's node counter (`*global_mgmt`) made every
