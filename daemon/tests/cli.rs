@@ -220,3 +220,22 @@ fn a_bundle_that_is_a_file_or_holds_a_fifo_is_refused_by_name() {
         "{err}"
     );
 }
+
+/// Issue 34 (notes): `[capture] end` beyond the capture's frames is said, not clamped silently.
+#[test]
+fn an_end_beyond_the_capture_is_logged() {
+    let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
+    let service = format!("dear-test/{}/end-beyond/frames", std::process::id());
+    let out = Command::new(env!("CARGO_BIN_EXE_deard"))
+        .args(["--replay", demo, "--refine", "none", "--pacing", "fast"])
+        .args(["--exit-when-done", "--end", "1000", "--service", &service])
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("run deard");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("[capture] end is beyond the capture's frames") && err.contains("end=1000"),
+        "{err}"
+    );
+}
