@@ -72,6 +72,12 @@ if [ -d train ]; then
     tier "pytest"; (cd train && ../.venv/bin/python -m pytest -q tests)
     # The outside aligner's scoring against the shared fixtures (numpy only, no OpenCV).
     tier "outside aligner scoring"; .venv/bin/python scripts/outside_aligner.py --check
+    # The ROS 2 bridge (issue 35) against an independent DDS: Cyclone DDS's Python package
+    # subscribes to dear-ros2's topics with the ROS 2 type names, and the depth it receives
+    # equals `dear dump`'s; CameraInfo and PointCloud2 checked too (loopback unicast; ~5 s).
+    tier "ROS 2 bridge (tests/scripts/ros2_bridge.py)"
+    cargo build --quiet -p dear-ros2 --bin dear-ros2
+    .venv/bin/python tests/scripts/ros2_bridge.py
     # The Python client package against a real target/debug/deard (built by cargo test above).
     tier "pytest (client-py)"; (cd client-py && ../.venv/bin/python -m pytest -q tests)
     # `dear view` in a real browser (issue 35): Debian's Chromium, through chromedriver, loads

@@ -28,6 +28,6 @@ pub use calibration::Calibration;
 pub use error::CaptureError;
 pub use frame::{is_valid_depth, Flow, GroundTruth, RgbdFrame, Sample};
 pub use layout::FramePaths;
-pub use manifest::{CaptureManifest, FrameEntry, Intrinsics};
+pub use manifest::{parse_intrinsics, CaptureManifest, FrameEntry, Intrinsics};
 pub use reader::CaptureDir;
 pub use writer::CaptureWriter;

@@ -58,6 +58,28 @@ impl Intrinsics {
     }
 }
 
+/// `FX,FY,CX,CY`: the RGB camera's pinhole intrinsics given on the command line (`dear dump`,
+/// `dear record`, `dear-ros2`; a clap value parser): positive focal lengths, all values finite.
+pub fn parse_intrinsics(s: &str) -> Result<Intrinsics, String> {
+    let values: Vec<f32> = s
+        .split(',')
+        .map(|v| v.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{s:?} is not four comma-separated numbers FX,FY,CX,CY"))?;
+    let [fx, fy, cx, cy] = values[..] else {
+        return Err(format!(
+            "{s:?} has {} values, expected FX,FY,CX,CY",
+            values.len()
+        ));
+    };
+    if !(fx > 0.0 && fy > 0.0 && values.iter().all(|v| v.is_finite())) {
+        return Err(format!(
+            "{s:?}: focal lengths must be positive and all values finite"
+        ));
+    }
+    Ok(Intrinsics { fx, fy, cx, cy })
+}
+
 /// One entry of the frame list. Ids are unique and timestamps never decrease along the list
 /// (checked by the readers; JSON Schema cannot say it).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]

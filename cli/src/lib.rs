@@ -204,26 +204,9 @@ pub fn first_frame(
 }
 
 /// `FX,FY,CX,CY`: the RGB camera's pinhole intrinsics given on the command line (`dump`,
-/// `record`; clap value parser).
-pub fn parse_intrinsics(s: &str) -> Result<dear_capture::Intrinsics, String> {
-    let values: Vec<f32> = s
-        .split(',')
-        .map(|v| v.trim().parse::<f32>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| format!("{s:?} is not four comma-separated numbers FX,FY,CX,CY"))?;
-    let [fx, fy, cx, cy] = values[..] else {
-        return Err(format!(
-            "{s:?} has {} values, expected FX,FY,CX,CY",
-            values.len()
-        ));
-    };
-    if !(fx > 0.0 && fy > 0.0 && values.iter().all(|v| v.is_finite())) {
-        return Err(format!(
-            "{s:?}: focal lengths must be positive and all values finite"
-        ));
-    }
-    Ok(dear_capture::Intrinsics { fx, fy, cx, cy })
-}
+/// `record`; clap value parser). Defined in dear-capture, next to `Intrinsics`, so the ROS 2
+/// bridge (`dear-ros2`) parses `--intrinsics` by the same rules.
+pub use dear_capture::parse_intrinsics;
 
 /// Service name argument shared by the subcommands: the default camera's frame service.
 pub fn default_service() -> String {
