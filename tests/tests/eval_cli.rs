@@ -116,7 +116,7 @@ fn eval_measures_baselines_and_a_bundle_and_writes_json_markdown_and_figures() {
     let per_frame: Vec<f64> = tracking
         .lines()
         .map(|l| l.split(',').collect::<Vec<_>>())
-        .filter(|cells| cells[1] == "smoke-edge") // frame,method,aepe_px,flow_network
+        .filter(|cells| cells[1] == "smoke-edge") // frame,method,aepe_px,flow_network,…
         .map(|cells| cells[2].parse().unwrap())
         .collect();
     assert_eq!(per_frame.len(), 3, "{tracking}");
@@ -138,12 +138,25 @@ fn eval_measures_baselines_and_a_bundle_and_writes_json_markdown_and_figures() {
     // method with a flow.
     let network_runs = json["online_network_frames"][0][1].as_u64().unwrap();
     assert!((1..=3).contains(&network_runs), "{network_runs}");
-    assert!(tracking.starts_with("frame,method,aepe_px,flow_network\n"));
+    assert!(tracking.starts_with(
+        "frame,method,aepe_px,flow_network,health,constrained,correction_px,uncertainty_px,\
+         held_back,disagreement,shift_px,shift_ncc,shift_at_limit\n"
+    ));
     assert_eq!(
         tracking.matches(",smoke-edge online,").count(),
         3,
         "{tracking}"
     );
+    // The online rows say the calibration's health (issue 32): the estimator starts from the
+    // capture's static calibration, so it is assessed from the first frame.
+    let states = ["good", "can improve", "needs recalibration"];
+    for line in tracking
+        .lines()
+        .filter(|l| l.contains(",smoke-edge online,"))
+    {
+        let health = line.split(',').nth(4).unwrap();
+        assert!(states.contains(&health), "{line}");
+    }
     assert_eq!(
         tracking.matches(",static-calibration,").count(),
         3,
