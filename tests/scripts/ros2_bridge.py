@@ -12,6 +12,8 @@ QoS, and checks, with `deard` replaying samples/demo in a loop and `dear-ros2` p
 - PointCloud2 is organised (width × height points, x, y, z float32), z equals the depth image
   of the same frame (to the millimetre's rounding) where it is valid, x and y back-project
   with K, and x, y, z are NaN where the depth is invalid;
+- a second bridge on the same service with --depth-encoding 32FC1 publishes metres (NaN where
+  invalid) equal to the 16UC1 millimetres of the same frame, to the millimetre's rounding;
 - the colour (rgb8) and confidence (mono8) images have the frame's size.
 
 Discovery stays on this host and needs no multicast: Cyclone is configured for 127.0.0.1
@@ -145,7 +147,7 @@ class Subscriber:
     def __init__(self, domain: int, namespace: str) -> None:
         types = {"Image": Image, "CameraInfo": CameraInfo, "PointCloud2": PointCloud2}
         # rmw_qos_profile_sensor_data, as the bridge offers it.
-        qos = Qos(
+        self.qos = qos = Qos(
             Policy.Reliability.BestEffort,
             Policy.History.KeepLast(5),
             Policy.Durability.Volatile,
@@ -163,6 +165,13 @@ class Subscriber:
             topic = Topic(self.participant, f"rt{namespace}/{leaf}", types[kind])
             self.readers[leaf] = DataReader(self.participant, topic, qos=qos)
         self.received: dict[str, list[tuple[int, Any]]] = {leaf: [] for leaf in self.readers}
+
+    def add(self, key: str, topic: str, kind: Any) -> None:
+        """One more reader, of `topic` (a DDS topic name), kept under `key`."""
+        self.readers[key] = DataReader(
+            self.participant, Topic(self.participant, topic, kind), qos=self.qos
+        )
+        self.received[key] = []
 
     def poll(self) -> None:
         for leaf, reader in self.readers.items():
@@ -266,8 +275,8 @@ class Run:
         self.k = [intr["fx"], intr["fy"], intr["cx"], intr["cy"]]
         pid = os.getpid()
         self.service = f"dear-test/{pid}/ros2/frames"
-        namespace = f"/dear_test/_{pid}/ros2"
-        domain = 1 + pid % 200  # domains 1..200; 0 is every ROS 2 system's default
+        self.namespace = namespace = f"/dear_test/_{pid}/ros2"
+        self.domain = domain = 1 + pid % 200  # domains 1..200; 0 is every ROS 2 system's default
         config = tmp / "cyclonedds.xml"
         config.write_text(CYCLONE_CONFIG)
         os.environ["CYCLONEDDS_URI"] = f"file://{config}"
@@ -324,9 +333,44 @@ class Run:
             p.wait()
 
 
+def check_metres(sub: Subscriber, width: int, height: int) -> int:
+    """The second bridge's 32FC1 depth (metres, NaN invalid) against the 16UC1 one's."""
+    mm_msgs = sub.received["depth/image_raw"]
+    checked = 0
+    for t, msg in sub.received["32FC1"]:
+        assert (msg.width, msg.height, msg.encoding) == (width, height, "32FC1"), msg.encoding
+        assert msg.step == 4 * width and msg.is_bigendian == 0
+        same = [m for u, m in mm_msgs if stamp_ns(m) == stamp_ns(msg) and abs(u - t) < 1e9]
+        if len(same) != 1:
+            continue
+        m = np.frombuffer(data_bytes(msg.data), dtype="<f4").reshape(height, width)
+        mm = np.frombuffer(data_bytes(same[0].data), dtype="<u2").reshape(height, width)
+        valid = mm > 0
+        assert (np.isfinite(m) == valid).all(), "32FC1's valid pixels differ from 16UC1's"
+        assert np.abs(m[valid] * 1000 - mm[valid]).max() <= 0.5 + 1e-3, "32FC1 != 16UC1"
+        checked += 1
+    return checked
+
+
 def check(run: Run, bin_dir: Path, timeout: float) -> None:
     started = time.monotonic()
     width, height, k = run.width, run.height, run.k
+    # A second bridge on the same service: depth in metres (32FC1), images only.
+    metres_ns = f"{run.namespace}_m"
+    run.logs["bridge32"] = run.tmp / "bridge32.log"
+    with open(run.logs["bridge32"], "wb") as log:
+        run.processes.append(
+            subprocess.Popen(
+                [
+                    *[bin_dir / "dear-ros2", "--service", run.service],
+                    *["--domain-id", str(run.domain), "--namespace", metres_ns],
+                    *["--depth-encoding", "32FC1", "--interface", "127.0.0.1"],
+                ],
+                stdout=subprocess.DEVNULL,
+                stderr=log,
+            )
+        )
+    run.sub.add("32FC1", f"rt{metres_ns}/depth/image_raw", Image)
     run.poll("a message on every topic", timeout, lambda: all(run.sub.counts().values()))
     print(f"ros2_bridge: every topic received after {time.monotonic() - started:.1f} s")
     dump = run.tmp / "dump"
@@ -345,6 +389,9 @@ def check(run: Run, bin_dir: Path, timeout: float) -> None:
     matched = check_depth_against_dump(run.sub, dump, width, height)
     assert matched >= 5, f"only {matched} of the 10 dumped frames arrived over DDS"
     print(f"ros2_bridge: depth equals dear dump's in {matched} of 10 frames")
+    metres = check_metres(run.sub, width, height)
+    assert metres >= 3, f"only {metres} 32FC1 depth images had their 16UC1 one"
+    print(f"ros2_bridge: 32FC1 depth (second bridge) equals the 16UC1 in {metres} frames")
     check_camera_info(run.sub, k, width, height)
     print(f"ros2_bridge: CameraInfo K = {k} (float32)")
     clouds = check_point_clouds(run.sub, k, width, height)
@@ -358,6 +405,7 @@ def check(run: Run, bin_dir: Path, timeout: float) -> None:
         assert (msg.width, msg.height, msg.encoding) == (width, height, encoding)
         assert len(data_bytes(msg.data)) == width * height * channels
     frame_ids = {m.header.frame_id for v in run.sub.received.values() for _, m in v}
+    # Both bridges: the camera's name from the service, as the optical frame.
     assert frame_ids == {"ros2_optical_frame"}, frame_ids
     print(f"ros2_bridge: bridge figures {json.dumps(run.stop_bridge())}")
     print(f"ros2_bridge: ok ({time.monotonic() - started:.1f} s)")
