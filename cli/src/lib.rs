@@ -171,9 +171,21 @@ pub fn next_frame(
             Err(dear_client::ReceiveError::BadFrame { service, source }) => {
                 tracing::warn!(%service, error = %source, "skipping a malformed frame");
             }
+            Err(e @ dear_client::ReceiveError::UntrustedPublisher { .. }) => {
+                warn_untrusted_once(&e);
+            }
             Err(_) if stop.is_set() => return Ok(None),
             Err(e) => return Err(e.into()),
         }
+    }
+}
+
+/// Says once per process that frames of another user's publisher are refused (issue 34): the
+/// command goes on with the service's own frames.
+pub fn warn_untrusted_once(e: &dear_client::ReceiveError) {
+    static WARNED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+    if !WARNED.swap(true, Ordering::Relaxed) {
+        eprintln!("dear: warning: {e}");
     }
 }
 

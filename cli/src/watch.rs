@@ -49,6 +49,11 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
                 tracing::debug!(error = %source, "frame rejected");
                 window.reject();
             }
+            // Another user's publisher on the service: its frames are refused and counted.
+            Err(e @ ReceiveError::UntrustedPublisher { .. }) => {
+                super::warn_untrusted_once(&e);
+                window.reject();
+            }
             // Ctrl-C interrupts the wait; that is a stop, not a failure.
             Err(_) if stop.is_set() => break,
             Err(e) => return Err(e.into()),

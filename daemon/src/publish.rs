@@ -370,13 +370,17 @@ fn log_cleanup(state: iceoryx2::node::CleanupState, when: &str) {
 /// daemon on the same service would interleave two streams whose frame ids and calibrations
 /// have nothing to do with each other. Two daemons starting in the same instant both see the
 /// other and both refuse; one of them is restarted by its supervisor and finds the service
-/// free.
+/// free. A publisher of another user than the root's owner (or root) does not count: clients
+/// refuse its frames, so the daemon serves beside it (issue 34).
 fn refuse_a_second_publisher(
     root: &std::path::Path,
     frames: &FrameService,
     own: iceoryx2::identifiers::UniquePublisherId,
     name: &str,
 ) -> Result<(), PublisherError> {
+    use std::os::unix::fs::MetadataExt;
+    // The service's user: the owner of the root (clients trust its publishers and root's).
+    let owner = std::fs::metadata(root).map(|m| m.uid()).ok();
     let mut others = Vec::new();
     frames.dynamic_config().list_publishers(|details| {
         if details.publisher_id != own {
@@ -385,15 +389,18 @@ fn refuse_a_second_publisher(
                 .pid::<Transport>()
                 .map(|pid| pid.value().to_string())
                 .unwrap_or_else(|_| "unknown".into());
-            // The user it runs as: the owner of its node's directory (issue 34: a member of
-            // the service's group can publish first; clients refuse its frames).
+            // The user it runs as: the owner of its node's directory.
             let node_dir = root.join("nodes").join(details.node_id.value().to_string());
-            match std::fs::symlink_metadata(&node_dir) {
-                Ok(meta) => others.push(format!(
-                    "{pid}, uid {}",
-                    std::os::unix::fs::MetadataExt::uid(&meta)
-                )),
-                Err(_) => others.push(pid),
+            let uid = std::fs::symlink_metadata(&node_dir).map(|m| m.uid()).ok();
+            match (uid, owner) {
+                // Issue 34: a member of the service's group who publishes first. Clients
+                // refuse its frames (dear_client::ReceiveError::UntrustedPublisher), so the
+                // service is served anyway instead of being locked out.
+                (Some(uid), Some(owner)) if uid != owner && uid != 0 => {
+                    tracing::warn!(service = name, pid, uid, root_owner = owner, "another user's process publishes on this service: clients refuse its frames; serving anyway");
+                }
+                (Some(uid), _) => others.push(format!("{pid}, uid {uid}")),
+                (None, _) => others.push(pid),
             }
         }
         CallbackProgression::Continue

@@ -83,6 +83,7 @@ fn main() {
     });
     let deadline = Instant::now() + Duration::from_secs_f64(args.timeout_s);
     let mut received = 0;
+    let mut refused = false;
     let status = loop {
         if received >= args.count {
             break 0;
@@ -105,6 +106,13 @@ fn main() {
                 thread::sleep(Duration::from_millis(args.delay_ms));
             }
             Ok(None) => {}
+            // Another user's publisher (issue 34): refused, said once, and the probe goes on.
+            Err(e @ dear_client::ReceiveError::UntrustedPublisher { .. }) => {
+                if !refused {
+                    eprintln!("dear-probe: {e}");
+                    refused = true;
+                }
+            }
             Err(e) => {
                 eprintln!("dear-probe: {e}");
                 break 2;
