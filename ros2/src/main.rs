@@ -54,7 +54,8 @@ struct Args {
     /// Exit after publishing this many frames.
     #[arg(long, value_name = "N")]
     count: Option<u64>,
-    /// Give up when the service cannot be joined, or no frame arrives, for this many seconds.
+    /// Give up when the service cannot be joined, or no frame arrives, for this many seconds
+    /// (0: never; a deard restart within it is followed).
     #[arg(long, value_name = "S", default_value_t = 30.0)]
     timeout_s: f64,
     /// Message stamps: `capture` is the header's capture time as it is (a live V4L2 camera's
@@ -164,7 +165,17 @@ fn main() -> anyhow::Result<()> {
     }
     let frame_id = options.frame_id.clone();
     let mut bridge = Bridge::new(options)?;
-    let timeout = Duration::from_secs_f64(args.timeout_s);
+    if !(args.timeout_s >= 0.0 && args.timeout_s.is_finite()) {
+        anyhow::bail!(
+            "--timeout-s {} is not a number of seconds >= 0",
+            args.timeout_s
+        );
+    }
+    let timeout = if args.timeout_s == 0.0 {
+        Duration::MAX
+    } else {
+        Duration::from_secs_f64(args.timeout_s)
+    };
     let client = connect(&args.service, timeout, &stop)?;
     for (topic, kind) in bridge.topics() {
         tracing::info!("publishing {topic} ({kind})");
@@ -186,7 +197,12 @@ fn main() -> anyhow::Result<()> {
     while !stop.load(Ordering::Relaxed) && args.count.is_none_or(|n| frames < n) {
         let Some(mut frame) = client.wait(Duration::from_millis(200))? else {
             if last_frame.elapsed() >= timeout {
-                anyhow::bail!("no frame from {:?} for {} s", args.service, args.timeout_s);
+                anyhow::bail!(
+                    "no frame from {:?} for {} s (is deard running and publishing there? \
+                     `dear list` shows the frame services)",
+                    args.service,
+                    args.timeout_s
+                );
             }
             continue;
         };
@@ -234,7 +250,13 @@ fn main() -> anyhow::Result<()> {
     if args.stats {
         latency_ms.sort_by(f64::total_cmp);
         work_ms.sort_by(f64::total_cmp);
-        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        let mean = |v: &[f64]| {
+            if v.is_empty() {
+                f64::NAN
+            } else {
+                v.iter().sum::<f64>() / v.len() as f64
+            }
+        };
         let cpu_ms_per_frame = match cpu {
             Some((s, n)) if n > 0 => s * 1e3 / n as f64,
             _ => f64::NAN,
