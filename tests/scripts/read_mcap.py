@@ -21,6 +21,8 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
 IMAGE_TOPICS = ("depth", "rgb", "confidence")
+#: The calibration health channel's states, by code (docs/calibration-health.md).
+HEALTH_STATES = ("unknown", "good", "can improve", "needs recalibration")
 
 
 def stamp_ns(msg: Any) -> int:
@@ -41,6 +43,7 @@ def main() -> None:
     capture_stamps = {f["timestamp_ns"] for f in json.loads(args.capture.read_text())["frames"]}
 
     topics = {leaf: f"{args.prefix}/{leaf}" for leaf in (*IMAGE_TOPICS, "calibration")}
+    health_topic = f"{args.prefix}/calibration_health"
     by_topic: dict[str, list[tuple[Any, Any]]] = defaultdict(list)
     with args.file.open("rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
@@ -48,14 +51,28 @@ def main() -> None:
         assert summary is not None, "no summary section: the file was not finished"
         schemas = {s.name for s in summary.schemas.values()}
         print(f"schemas: {sorted(schemas)}")
-        assert schemas == {"foxglove.RawImage", "foxglove.CameraCalibration"}, schemas
+        assert schemas == {
+            "foxglove.RawImage",
+            "foxglove.CameraCalibration",
+            "dear.CalibrationHealth",
+        }, schemas
         channel_topics = {
             c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()
         }
         print(f"channels: {channel_topics}")
-        assert set(channel_topics) == set(topics.values()), channel_topics
+        assert set(channel_topics) == {*topics.values(), health_topic}, channel_topics
         assert channel_topics[topics["calibration"]] == "foxglove.CameraCalibration"
-        for _schema, channel, message, decoded in reader.iter_decoded_messages():
+        assert channel_topics[health_topic] == "dear.CalibrationHealth"
+        # The health channel is JSON, the others protobuf: decode each by its encoding.
+        factory = DecoderFactory()
+        decoders: dict[int, Any] = {}
+        for schema, channel, message in reader.iter_messages():
+            if channel.message_encoding == "json":
+                decoded = json.loads(message.data)
+            else:
+                if channel.id not in decoders:
+                    decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
+                decoded = decoders[channel.id](message.data)
             by_topic[channel.topic].append((message, decoded))
         metadata = {m.name: m.metadata for m in reader.iter_metadata()}
     print(f"metadata dear.record: {metadata.get('dear.record')}")
@@ -105,6 +122,17 @@ def main() -> None:
             assert image.step == width * bytes_per_pixel[image.encoding], (leaf, image.step)
             assert len(image.data) == image.step * height, (leaf, len(image.data))
     print(f"images: {width}x{height}, encodings {expected_encoding}")
+
+    health = by_topic[health_topic]
+    assert len(health) == n, (len(health), n)
+    for (hm, h), (dm, _) in zip(health, by_topic[topics["depth"]], strict=True):
+        assert hm.sequence == dm.sequence and hm.log_time == dm.log_time
+        assert h["health"] == HEALTH_STATES[h["health_code"]], h
+        assert 0 <= h["constrained_directions"] <= 4, h
+        assert h["frame_id"], h
+        stamp = h["timestamp"]["sec"] * 1_000_000_000 + h["timestamp"]["nsec"]
+        assert stamp in capture_stamps, h
+    print(f"calibration health: {sorted({h['health'] for _, h in health})}")
 
     for _, calibration in by_topic[topics["calibration"]]:
         assert (calibration.width, calibration.height) == (width, height)
