@@ -88,17 +88,18 @@ fn open_regular_nofollow(path: &Path, write: bool) -> io::Result<File> {
 /// `iox2_<hash>_<port id>.data`).
 fn data_segments(root: &Path, publisher_id: u128) -> Vec<PathBuf> {
     let tag = format!("_{publisher_id}");
+    files_named(root, |n| n.ends_with(".data") && n.contains(&tag))
+}
+
+/// The entries of `root` whose file names `keep` accepts (none when it cannot be read).
+fn files_named(root: &Path, keep: impl Fn(&str) -> bool) -> Vec<PathBuf> {
     let Ok(entries) = std::fs::read_dir(root) else {
         return Vec::new();
     };
     entries
         .flatten()
         .map(|e| e.path())
-        .filter(|p| {
-            p.file_name()
-                .and_then(|n| n.to_str())
-                .is_some_and(|n| n.ends_with(".data") && n.contains(&tag))
-        })
+        .filter(|p| p.file_name().and_then(|n| n.to_str()).is_some_and(&keep))
         .collect()
 }
 
@@ -148,18 +149,7 @@ fn global_mgmt_files(root: &Path) -> Vec<PathBuf> {
         v.minor(),
         v.patch()
     );
-    let Ok(entries) = std::fs::read_dir(root) else {
-        return Vec::new();
-    };
-    entries
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| {
-            p.file_name()
-                .and_then(|n| n.to_str())
-                .is_some_and(|n| n.starts_with("iox2_") && n.ends_with(&suffix))
-        })
-        .collect()
+    files_named(root, |n| n.starts_with("iox2_") && n.ends_with(&suffix))
 }
 
 /// Size of iceoryx2 0.10's node counter file: the version (u64) and the counter (u32), padded
