@@ -4,6 +4,8 @@
 //! Its own crate so that the SDK (`dear-client`) stays thin: applications linking the SDK do
 //! not pull clap, indicatif, the pipeline or tract, which `dear eval` needs.
 
+#![forbid(unsafe_code)]
+
 pub mod devices;
 pub mod dump;
 pub mod eval;

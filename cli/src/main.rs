@@ -2,6 +2,8 @@
 //! `dear_cli` library (`cli/src/`); this file only parses, runs and maps the outcome to an exit
 //! status.
 
+#![forbid(unsafe_code)]
+
 use dear_cli as cli;
 
 use std::process::ExitCode;

@@ -252,6 +252,7 @@ struct Planes {
 // sample, and with it the mapping, outlives them); `Py<Sample>` itself is Send and Sync (only
 // its reference count is touched off the sample's thread; see the module documentation).
 unsafe impl Send for Planes {}
+// SAFETY: as for Send above: shared references only read through the pointers.
 unsafe impl Sync for Planes {}
 
 /// One received frame.

@@ -13,6 +13,8 @@
 //! - [`blend`]: depth over RGB with depth edges, to judge alignment.
 //! - `plot` (feature `plot`): depth profiles along a row, one curve per source.
 
+#![forbid(unsafe_code)]
+
 pub mod blend;
 pub mod colormap;
 pub mod depth;

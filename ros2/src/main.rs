@@ -76,14 +76,16 @@ enum Stamp {
 
 /// CPU time (user + system) of this process, all threads, in seconds.
 fn cpu_seconds() -> f64 {
-    // SAFETY: getrusage writes the struct it is given.
+    // SAFETY: rusage is plain integers, for which all zero bytes are a valid value.
     let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: getrusage writes the struct it is given.
     unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut usage) };
     let t = |tv: libc::timeval| tv.tv_sec as f64 + tv.tv_usec as f64 * 1e-6;
     t(usage.ru_utime) + t(usage.ru_stime)
 }
 
 fn clock_ns(clock: libc::clockid_t) -> u64 {
+    // SAFETY: timespec is plain integers, for which all zero bytes are a valid value.
     let mut ts: libc::timespec = unsafe { std::mem::zeroed() };
     // SAFETY: clock_gettime writes the struct it is given.
     unsafe { libc::clock_gettime(clock, &mut ts) };

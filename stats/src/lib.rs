@@ -37,6 +37,8 @@
 //! - The evaluation's error classes (`dear_pipeline::metrics`, `train/dear_train/metrics.py`):
 //!   the paper's protocol, shared with Python through `fixtures/metrics/`.
 
+#![forbid(unsafe_code)]
+
 use std::cmp::Ordering;
 
 /// A value that can be ranked: a total order (floats by `total_cmp`, so NaN sorts last) and a

@@ -17,6 +17,8 @@
 //! - [`sequence`]: moving scenes with drifting calibration;
 //! - [`preview`]: the preview panel (colour maps from `dear-picture`).
 
+#![forbid(unsafe_code)]
+
 pub mod classical;
 pub mod dataset;
 pub mod family;

@@ -1,5 +1,7 @@
 //! `dear-synth`: the ToF simulator's command line. See `synth/README.md`.
 
+#![forbid(unsafe_code)]
+
 use std::path::PathBuf;
 use std::time::Instant;
 

@@ -191,6 +191,7 @@ fn a_symbolic_link_in_the_root_is_removed_not_followed() {
     let s = setup(if is_root() {
         NOBODY
     } else {
+        // SAFETY: getegid has no preconditions.
         unsafe { libc::getegid() }
     });
     let elsewhere = s.dir.join("elsewhere");
@@ -248,6 +249,7 @@ fn junk_in_the_node_counter_is_repaired_at_start_and_while_serving() {
     let s = setup(if is_root() {
         NOBODY
     } else {
+        // SAFETY: getegid has no preconditions.
         unsafe { libc::getegid() }
     });
     let service = unique_service("global-mgmt");
@@ -302,6 +304,7 @@ fn deleted_transport_files_are_noticed_and_made_again() {
     let s = setup(if is_root() {
         NOBODY
     } else {
+        // SAFETY: getegid has no preconditions.
         unsafe { libc::getegid() }
     });
     let service = unique_service("deleted");

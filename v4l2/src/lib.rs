@@ -9,6 +9,9 @@
 //!   RGB planes (including host-side 4-phase ToF demodulation).
 //! - [`pair`]: pairing ToF and RGB frames by timestamp, counting what stays unpaired.
 
+// `deny`, not `forbid`: ndarray's `s!` macro allows `unsafe_code` inside its expansion.
+#![deny(unsafe_code)]
+
 pub mod device;
 pub mod pair;
 pub mod pixel;

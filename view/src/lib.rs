@@ -20,6 +20,8 @@
 //!   are served at a time (others get 503 until one has been idle for
 //!   [`http::VIEWER_IDLE`]).
 
+#![forbid(unsafe_code)]
+
 pub mod http;
 pub mod intake;
 pub mod render;
