@@ -1,4 +1,4 @@
-//! `dear-capture`: the capture-directory format (docs/design.md, "Capture directory format"),
+//! `dear-capture`: the capture-directory format (docs/capture-format.md),
 //! one format for simulator output, recordings, replay, evaluation and training.
 //!
 //! - [`manifest`]: `capture.json`, its types and the rules it is validated by;

@@ -1,5 +1,5 @@
-//! `capture.json`: the manifest of a capture directory (docs/design.md, "Capture directory
-//! format"), and the rules it is read by.
+//! `capture.json`: the manifest of a capture directory (docs/capture-format.md), and the rules
+//! it is read by.
 //!
 //! The rules live in two forms side by side: as `#[schemars(...)]` bounds on the types, from
 //! which [`crate::schema`] generates the JSON Schema the Python reader validates with, and in

@@ -1,4 +1,4 @@
-//! Replaying a capture directory (docs/design.md, "Capture directory format"): paced by the recorded timestamps or as
+//! Replaying a capture directory (docs/capture-format.md): paced by the recorded timestamps or as
 //! fast as possible, optionally looping, between a start and an end position.
 
 use std::sync::atomic::AtomicBool;
