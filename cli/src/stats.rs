@@ -9,6 +9,7 @@
 use std::fmt;
 use std::time::Duration;
 
+use dear_client::{SequenceStep, SequenceTracker};
 use dear_proto::{flags, FrameHeader, Stage};
 use serde::Serialize;
 
@@ -24,9 +25,9 @@ pub struct Window {
     /// `(run_id, skipped, dropped)` of the last frame of the previous report, for the
     /// per-second delta.
     previous_counters: Option<(u64, u64, u64)>,
-    /// `(run_id, sequence)` of the newest frame received, across reports: the next frame's
-    /// sequence gap is what this client lost.
-    last_sample: Option<(u64, u64)>,
+    /// The newest numbered frame received, across reports: the next frame's sequence gap is
+    /// what this client lost.
+    sequence: SequenceTracker,
     /// Frames lost in the window (gaps in `sequence`).
     lost: u64,
     /// New run ids seen in the window: publisher restarts.
@@ -118,27 +119,12 @@ impl Window {
                 self.stages[stage as usize].push(us);
             }
         }
-        self.track_sequence(header);
+        match self.sequence.see(header) {
+            SequenceStep::Next { lost } => self.lost += lost,
+            SequenceStep::Restart => self.restarts += 1,
+            SequenceStep::First | SequenceStep::Unnumbered => {}
+        }
         self.last = Some(*header);
-    }
-
-    /// Counts lost frames and restarts from `(run_id, sequence)`. A publisher's sequence has
-    /// no gaps on its side, so a gap of `n` is `n` frames this client never got. A run id of 0
-    /// means the publisher numbers nothing: no loss can be counted.
-    fn track_sequence(&mut self, header: &FrameHeader) {
-        if header.run_id == 0 {
-            return;
-        }
-        match self.last_sample {
-            Some((run, seq)) if run == header.run_id => {
-                // Within a run the sequence only increases; a repeat or step back (which the
-                // protocol rules out) is not counted as a loss.
-                self.lost += header.sequence.saturating_sub(seq).saturating_sub(1);
-            }
-            Some(_) => self.restarts += 1,
-            None => {}
-        }
-        self.last_sample = Some((header.run_id, header.sequence));
     }
 
     /// Counts a frame that arrived but failed validation.

@@ -17,8 +17,10 @@
 pub mod frame;
 #[cfg(feature = "images")]
 pub mod save;
+pub mod sequence;
 pub mod subscriber;
 
 pub use dear_proto::{confidence, default_service_name, flags, FrameHeader, HeaderError, Stage};
 pub use frame::{Frame, FrameError};
+pub use sequence::{SequenceStep, SequenceTracker};
 pub use subscriber::{Client, ClientError, ConnectError, ReceiveError};

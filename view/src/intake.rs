@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use dear_client::{Client, Frame, ReceiveError};
+use dear_client::{Client, Frame, ReceiveError, SequenceStep, SequenceTracker};
 use dear_proto::FrameHeader;
 use ndarray::{ArrayView2, ArrayView3};
 
@@ -92,7 +92,7 @@ pub struct State {
     /// One point a second, oldest first, at most [`HISTORY_SECONDS`].
     pub history: VecDeque<HistoryPoint>,
     arrivals: VecDeque<Instant>,
-    last_sample: Option<(u64, u64)>,
+    sequence: SequenceTracker,
     second_start: Instant,
     second_frames: u32,
     /// The newest header of the running second.
@@ -128,7 +128,7 @@ impl Shared {
                 error: None,
                 history: VecDeque::with_capacity(HISTORY_SECONDS),
                 arrivals: VecDeque::new(),
-                last_sample: None,
+                sequence: SequenceTracker::default(),
                 second_start: now,
                 second_frames: 0,
                 second_last: None,
@@ -156,15 +156,10 @@ impl State {
         self.error = None;
         self.arrivals.push_back(now);
         self.trim_arrivals(now);
-        if header.run_id != 0 {
-            match self.last_sample {
-                Some((run, seq)) if run == header.run_id => {
-                    self.lost += header.sequence.saturating_sub(seq).saturating_sub(1);
-                }
-                Some(_) => self.publisher_restarts += 1,
-                None => {}
-            }
-            self.last_sample = Some((header.run_id, header.sequence));
+        match self.sequence.see(header) {
+            SequenceStep::Next { lost } => self.lost += lost,
+            SequenceStep::Restart => self.publisher_restarts += 1,
+            SequenceStep::First | SequenceStep::Unnumbered => {}
         }
         self.latest = Some(Latest {
             header: *header,
