@@ -1177,7 +1177,7 @@ fn gauss_newton(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::edges::test_scene::textured_scene;
+    use crate::edges::test_scene::{fit_textured_scene, textured_scene};
 
     fn max_flow_error(c: Calibration, truth: Calibration, depths: &[f32]) -> f32 {
         depths
@@ -1253,19 +1253,7 @@ mod tests {
             cx: 3.0,
             cy: 1.5,
         };
-        let (rgb, amplitude, depth) = textured_scene(&truth);
-        let params = DirectFitParams {
-            contour_radius: 5,
-            depth_edge_weight: 1.0,
-            ..DirectFitParams::default()
-        };
-        let fit = estimate_calibration_direct(
-            rgb.view(),
-            amplitude.view(),
-            depth.view(),
-            Calibration::IDENTITY,
-            &params,
-        );
+        let fit = fit_textured_scene(&truth);
         assert!(!fit.fell_back, "{fit:?}");
         assert!(fit.baseline_fitted, "{fit:?}");
         let err = max_flow_error(fit.calibration, truth, &[0.8, 1.0, 1.2, 1.5, 1.8]);

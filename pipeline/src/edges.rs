@@ -119,4 +119,22 @@ pub(crate) mod test_scene {
         }
         (view.rgb, amplitude, depth)
     }
+
+    /// The direct fit of [`textured_scene`]`(truth)` from the identity, with the settings for
+    /// real contours (a ToF contour moves with the nearer surface, depth edges added).
+    pub(crate) fn fit_textured_scene(truth: &Calibration) -> crate::direct::DirectFit {
+        let (rgb, amplitude, depth) = textured_scene(truth);
+        let params = crate::direct::DirectFitParams {
+            contour_radius: 5,
+            depth_edge_weight: 1.0,
+            ..crate::direct::DirectFitParams::default()
+        };
+        crate::direct::estimate_calibration_direct(
+            rgb.view(),
+            amplitude.view(),
+            depth.view(),
+            Calibration::IDENTITY,
+            &params,
+        )
+    }
 }

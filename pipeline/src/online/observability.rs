@@ -313,7 +313,7 @@ mod tests {
     }
 
     use crate::direct::{estimate_calibration_direct, DirectFitParams};
-    use crate::edges::test_scene::textured_scene;
+    use crate::edges::test_scene::fit_textured_scene;
     use crate::online::{Measurement, OnlineCalibrator, OnlineConfig};
     use ndarray::{Array2, Array3};
 
@@ -422,19 +422,7 @@ mod tests {
     /// identity) converges to the truth as before.
     #[test]
     fn a_textured_misaligned_frame_still_converges() {
-        let (rgb, amplitude, depth) = textured_scene(&TRUTH);
-        let params = DirectFitParams {
-            contour_radius: 5,
-            depth_edge_weight: 1.0,
-            ..DirectFitParams::default()
-        };
-        let fit = estimate_calibration_direct(
-            rgb.view(),
-            amplitude.view(),
-            depth.view(),
-            Calibration::IDENTITY,
-            &params,
-        );
+        let fit = fit_textured_scene(&TRUTH);
         let m = Measurement::from_direct_fit(&fit).expect("the discs fit");
         let config = OnlineConfig {
             interval_frames: 1,
