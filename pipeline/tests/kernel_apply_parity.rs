@@ -38,6 +38,27 @@ fn gated_tail_matches_pytorch() {
     assert!(moved > out.len() / 4, "only {moved} pixels changed");
 }
 
+/// The hybrid refinement of `depth`: the per-pixel blend with the classical estimate, then the
+/// gated kernel (what the guarded tail selects its `refined` candidate from).
+fn hybrid_tail(
+    maps: &[Array2<f32>],
+    depth: &Array2<f32>,
+    classical: &Array2<f32>,
+    kernel: &GatedKernel,
+) -> Array2<f32> {
+    let mut base = Array2::zeros(depth.dim());
+    let mut out = Array2::zeros(depth.dim());
+    blend_classical(
+        maps,
+        depth.view(),
+        classical.view(),
+        base.view_mut(),
+        kernel,
+    );
+    apply_gated(maps, base.view(), out.view_mut(), kernel);
+    out
+}
+
 fn fixture(name: &str) -> serde_json::Value {
     common::load_fixture(&format!("kernel_apply/{name}"))
 }
@@ -80,16 +101,7 @@ fn hybrid_tail_matches_pytorch() {
     let maps = maps(&doc, HYBRID_CHANNELS);
     let want = plane(&doc["out"]);
     let kernel = kernel(&doc, Some(300.0), None);
-    let mut base = Array2::zeros(depth.dim());
-    let mut out = Array2::zeros(depth.dim());
-    blend_classical(
-        &maps,
-        depth.view(),
-        classical.view(),
-        base.view_mut(),
-        &kernel,
-    );
-    apply_gated(&maps, base.view(), out.view_mut(), &kernel);
+    let out = hybrid_tail(&maps, &depth, &classical, &kernel);
     let worst = out
         .iter()
         .zip(want.iter())
@@ -128,18 +140,10 @@ fn guarded_tail_matches_pytorch() {
         log_bound: 6.0,
     };
     let kernel = kernel(&doc, Some(300.0), Some(errors));
-    let mut base = Array2::zeros(depth.dim());
-    let mut out = Array2::zeros(depth.dim());
+    let refined = hybrid_tail(&maps, &depth, &classical, &kernel);
+    // select_guarded takes the refined candidate in the plane it publishes into.
+    let mut out = refined.clone();
     let mut log_error = Array2::zeros(depth.dim());
-    blend_classical(
-        &maps,
-        depth.view(),
-        classical.view(),
-        base.view_mut(),
-        &kernel,
-    );
-    apply_gated(&maps, base.view(), out.view_mut(), &kernel);
-    let refined = out.clone();
     select_guarded(
         &maps,
         depth.view(),
