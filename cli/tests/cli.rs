@@ -164,6 +164,20 @@ fn dear(args: &[&str]) -> Command {
     cmd
 }
 
+/// `dear watch --json` on `service` for `seconds` reports, stdout and stderr piped.
+fn spawn_watch_json(service: &str, seconds: u32) -> Child {
+    dear(&[
+        "watch",
+        "--service",
+        service,
+        "--json",
+        "--count-seconds",
+        &seconds.to_string(),
+    ])
+    .spawn()
+    .unwrap()
+}
+
 fn check_success(out: &Output) {
     assert!(
         out.status.success(),
@@ -334,16 +348,7 @@ fn watch_reports_each_second_as_json() {
     let service = unique_service("watch");
     let mut publisher = TestPublisher::new(&service);
     let started = Instant::now();
-    let child = dear(&[
-        "watch",
-        "--service",
-        &service,
-        "--json",
-        "--count-seconds",
-        "2",
-    ])
-    .spawn()
-    .unwrap();
+    let child = spawn_watch_json(&service, 2);
     let out = publisher.serve(child, Duration::from_secs(30));
     let test_ms = started.elapsed().as_secs_f64() * 1e3;
     check_success(&out);
@@ -406,16 +411,7 @@ fn watch_says_when_the_publisher_restarted() {
     let service = unique_service("watch-restart");
     let mut first = Some(TestPublisher::new(&service));
     let first_run = format!("{:016x}", first.as_ref().unwrap().run_id);
-    let mut child = dear(&[
-        "watch",
-        "--service",
-        &service,
-        "--json",
-        "--count-seconds",
-        "6",
-    ])
-    .spawn()
-    .unwrap();
+    let mut child = spawn_watch_json(&service, 6);
     // Lines as they come, so the restart happens after watch has seen the first instance.
     let stdout = child.stdout.take().unwrap();
     let (tx, rx) = std::sync::mpsc::channel::<serde_json::Value>();
@@ -508,16 +504,7 @@ fn list_to_a_full_device_fails_cleanly() {
 fn watch_survives_stop_and_continue() {
     let service = unique_service("watch-stop");
     let mut publisher = TestPublisher::new(&service);
-    let mut child = dear(&[
-        "watch",
-        "--service",
-        &service,
-        "--json",
-        "--count-seconds",
-        "3",
-    ])
-    .spawn()
-    .unwrap();
+    let mut child = spawn_watch_json(&service, 3);
     let stdout = child.stdout.take().unwrap();
     let (tx, rx) = std::sync::mpsc::channel::<String>();
     let reader = std::thread::spawn(move || {
