@@ -17,6 +17,18 @@ from dear_train.training.checkpoint import build_model
 from dear_train.training.config import get_profile
 
 
+def random_refine_inputs(
+    seed: int, h: int, w: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Random ``refine.onnx`` inputs of one ``h``×``w`` frame: amplitude, depth (1–4 m), RGB
+    and a classical estimate 1 cm behind the depth."""
+    rng = np.random.default_rng(seed)
+    amp = rng.random((1, 1, h, w), dtype=np.float32)
+    depth = (1 + 3 * rng.random((1, 1, h, w))).astype(np.float32)
+    rgb = rng.random((1, 3, h, w), dtype=np.float32)
+    return amp, depth, rgb, (depth + 0.01).astype(np.float32)
+
+
 @pytest.mark.parametrize("variant", ["kpn", "norgb", "gated", "hybrid"])
 def test_edge_bundle_round_trip(tmp_path: Path, variant: str) -> None:
     profile = get_profile("smoke", variant=variant)
@@ -53,11 +65,7 @@ def test_edge_bundle_round_trip(tmp_path: Path, variant: str) -> None:
 
     # Independently of export_bundle's own check: refine.onnx takes and returns metres.
     sess = ort.InferenceSession(str(out / "refine.onnx"), providers=["CPUExecutionProvider"])
-    rng = np.random.default_rng(5)
-    amp = rng.random((1, 1, 40, 48), dtype=np.float32)
-    depth = (1 + 3 * rng.random((1, 1, 40, 48))).astype(np.float32)
-    rgb = rng.random((1, 3, 40, 48), dtype=np.float32)
-    classical = (depth + 0.01).astype(np.float32)
+    amp, depth, rgb, classical = random_refine_inputs(5, 40, 48)
     feed = (
         {"amplitude": amp, "depth": depth}
         | ({"rgb": rgb} if with_rgb else {})
@@ -153,11 +161,7 @@ def test_refiner_with_frame_level_context_exports_and_matches_onnxruntime(tmp_pa
     ops = {n.op_type for n in onnx.load(str(out / "refine.onnx")).graph.node}
     assert "ReduceMean" in ops or "GlobalAveragePool" in ops
     sess = ort.InferenceSession(str(out / "refine.onnx"), providers=["CPUExecutionProvider"])
-    rng = np.random.default_rng(9)
-    amp = rng.random((1, 1, 56, 72), dtype=np.float32)
-    depth = (1 + 3 * rng.random((1, 1, 56, 72))).astype(np.float32)
-    rgb = rng.random((1, 3, 56, 72), dtype=np.float32)
-    classical = (depth + 0.01).astype(np.float32)
+    amp, depth, rgb, classical = random_refine_inputs(9, 56, 72)
     (got,) = sess.run(None, {"amplitude": amp, "depth": depth, "rgb": rgb, "classical": classical})
     with torch.no_grad():
         want = model.refine.head_maps(
