@@ -33,6 +33,17 @@ struct Setup {
     capture: PathBuf,
 }
 
+/// The service's group for the tests that also run without root: `nobody`'s under root (the
+/// clients run as `nobody`), else this user's own.
+fn clients_group() -> u32 {
+    if is_root() {
+        NOBODY
+    } else {
+        // SAFETY: getegid has no preconditions.
+        unsafe { libc::getegid() }
+    }
+}
+
 /// The root is `0770`, its group `group` (the service's group: its members are clients).
 fn setup(group: u32) -> Setup {
     let tmp = tempfile::tempdir().unwrap();
@@ -188,12 +199,7 @@ fn an_outsider_is_asked_whether_it_is_in_the_group() {
 /// now removes links from its root before it creates anything there, and says so.
 #[test]
 fn a_symbolic_link_in_the_root_is_removed_not_followed() {
-    let s = setup(if is_root() {
-        NOBODY
-    } else {
-        // SAFETY: getegid has no preconditions.
-        unsafe { libc::getegid() }
-    });
+    let s = setup(clients_group());
     let elsewhere = s.dir.join("elsewhere");
     std::fs::create_dir(&elsewhere).unwrap();
     std::os::unix::fs::symlink(&elsewhere, s.root.join("nodes")).unwrap();
@@ -246,12 +252,7 @@ fn a_symbolic_link_in_the_root_is_removed_not_followed() {
 /// repairs it at start, and while it serves, naming the file.
 #[test]
 fn junk_in_the_node_counter_is_repaired_at_start_and_while_serving() {
-    let s = setup(if is_root() {
-        NOBODY
-    } else {
-        // SAFETY: getegid has no preconditions.
-        unsafe { libc::getegid() }
-    });
+    let s = setup(clients_group());
     let service = unique_service("global-mgmt");
     let mut first = s.daemon(&service, "first.log");
     first
@@ -301,12 +302,7 @@ fn junk_in_the_node_counter_is_repaired_at_start_and_while_serving() {
 /// service again, and a new client receives frames.
 #[test]
 fn deleted_transport_files_are_noticed_and_made_again() {
-    let s = setup(if is_root() {
-        NOBODY
-    } else {
-        // SAFETY: getegid has no preconditions.
-        unsafe { libc::getegid() }
-    });
+    let s = setup(clients_group());
     let service = unique_service("deleted");
     let mut daemon = s.daemon(&service, "deard.log");
     daemon
