@@ -15,6 +15,7 @@ use dear_pipeline::capture::CaptureDir;
 use dear_proto::service::{frame_event_service, frame_service, FrameEventService, FrameService};
 use dear_proto::Transport;
 use dear_proto::{flags, random_run_id, FrameHeader, PayloadLayout, Stage};
+use dear_test_support::process::{output_within, unique_service};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::*;
@@ -25,15 +26,6 @@ const H: usize = 12;
 const VARIANTS: u64 = 3;
 /// The test source's first frame id: ids and sequence numbers differ, so a mix-up shows.
 const FIRST_FRAME_ID: u64 = 100;
-
-/// A service name no other test (or concurrent test run) uses.
-fn unique_service(test: &str) -> String {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .subsec_nanos();
-    format!("dear/test-{test}-{}-{nanos}/frames", std::process::id())
-}
 
 fn expected_depth(k: u64, r: usize, c: usize) -> f32 {
     if (r + c).is_multiple_of(7) {
@@ -140,21 +132,8 @@ impl TestPublisher {
 
     /// Publishes every 20 ms until `child` exits (it may subscribe late: history is one frame),
     /// at most for `limit`; then collects its output.
-    fn serve(&mut self, mut child: Child, limit: Duration) -> Output {
-        let deadline = Instant::now() + limit;
-        while child.try_wait().unwrap().is_none() {
-            if Instant::now() > deadline {
-                let _ = child.kill();
-                let out = child.wait_with_output().unwrap();
-                panic!(
-                    "child still running after {limit:?}; stderr: {}",
-                    String::from_utf8_lossy(&out.stderr)
-                );
-            }
-            self.publish();
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        child.wait_with_output().unwrap()
+    fn serve(&mut self, child: Child, limit: Duration) -> Output {
+        output_within(child, "child", limit, || self.publish())
     }
 }
 

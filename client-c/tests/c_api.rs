@@ -9,13 +9,16 @@
 //! build it with `cargo build -p deard` first.
 
 use std::collections::BTreeMap;
-use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Command, Output, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
-use std::time::{Duration, Instant};
+use std::time::Duration;
+
+use dear_test_support::daemon::Daemon;
+use dear_test_support::paths::{bin_dir, demo_capture};
+use dear_test_support::process::{unique_service, wait_exit};
 
 /// What the static library needs from the system (`cargo rustc -p dear-client-c --release --
 /// --print native-static-libs`; the same list is in the README and the header).
@@ -29,15 +32,6 @@ const NATIVE_LIBS: &[&str] = &[
     "-lc",
 ];
 
-/// target/<profile>, from this test executable (target/<profile>/deps/c_api-…).
-fn profile_dir() -> PathBuf {
-    let exe = std::env::current_exe().expect("current exe");
-    exe.parent()
-        .and_then(Path::parent)
-        .expect("target/<profile>/deps/<test>")
-        .to_path_buf()
-}
-
 fn crate_dir() -> &'static Path {
     Path::new(env!("CARGO_MANIFEST_DIR"))
 }
@@ -46,7 +40,7 @@ fn crate_dir() -> &'static Path {
 fn cargo_build(package: &str) {
     let mut command = Command::new(env!("CARGO"));
     command.args(["build", "--quiet", "-p", package]);
-    if profile_dir().file_name().is_some_and(|n| n == "release") {
+    if bin_dir().file_name().is_some_and(|n| n == "release") {
         command.arg("--release");
     }
     let status = command
@@ -60,7 +54,7 @@ fn cargo_build(package: &str) {
 fn deard() -> &'static Path {
     static DEARD: OnceLock<PathBuf> = OnceLock::new();
     DEARD.get_or_init(|| {
-        let path = profile_dir().join("deard");
+        let path = bin_dir().join("deard");
         if !path.is_file() {
             eprintln!("{} missing: cargo build -p deard", path.display());
             cargo_build("deard");
@@ -91,7 +85,7 @@ fn static_library() -> &'static Path {
     static LIBRARY: OnceLock<PathBuf> = OnceLock::new();
     LIBRARY.get_or_init(|| {
         cargo_build("dear-client-c");
-        let path = profile_dir().join("libdear_client.a");
+        let path = bin_dir().join("libdear_client.a");
         assert!(path.is_file(), "{} not built", path.display());
         path
     })
@@ -106,7 +100,7 @@ fn c_program(source: &'static str) -> PathBuf {
         return path.clone();
     }
     let library = static_library();
-    let out_dir = profile_dir().join("dear-client-c-tests");
+    let out_dir = bin_dir().join("dear-client-c-tests");
     std::fs::create_dir_all(&out_dir).unwrap();
     let source_path = crate_dir().join(source);
     let name = source_path.file_stem().unwrap().to_owned();
@@ -131,73 +125,24 @@ fn c_program(source: &'static str) -> PathBuf {
     binary
 }
 
-/// A unique service name per test and process.
-fn unique_service(test: &str) -> String {
-    format!("dear-test/{}/c-{test}/frames", std::process::id())
-}
-
-/// A running `deard` replaying `samples/demo` in a loop at its recorded pace, alignment only;
-/// killed on drop.
-struct Daemon {
-    child: Child,
-    log: PathBuf,
-    _log_dir: tempfile::TempDir,
-}
-
-impl Daemon {
-    fn start(service: &str) -> Daemon {
-        let log_dir = tempfile::tempdir().unwrap();
-        let log = log_dir.path().join("deard.log");
-        let child = Command::new(deard())
-            .args(["--service", service, "--refine", "none", "--loop"])
-            .args([
-                "--pacing",
-                "timestamps",
-                "--stats-interval",
-                "1",
-                "--replay",
-            ])
-            .arg(crate_dir().join("../samples/demo"))
-            .env(dear_proto::IOX2_ROOT_ENV, iox2_root().join("iceoryx2"))
-            .env("RUST_LOG", "info")
-            .stdout(Stdio::null())
-            .stderr(File::create(&log).unwrap())
-            .spawn()
-            .expect("spawn deard");
-        let mut daemon = Daemon {
-            child,
-            log,
-            _log_dir: log_dir,
-        };
-        daemon.wait_for_log("serving", Duration::from_secs(60));
-        daemon
-    }
-
-    fn log_text(&self) -> String {
-        std::fs::read_to_string(&self.log).unwrap_or_default()
-    }
-
-    fn wait_for_log(&mut self, needle: &str, timeout: Duration) {
-        let deadline = Instant::now() + timeout;
-        while !self.log_text().contains(needle) {
-            if let Ok(Some(status)) = self.child.try_wait() {
-                panic!("deard exited ({status}):\n{}", self.log_text());
-            }
-            assert!(
-                Instant::now() < deadline,
-                "deard did not log {needle:?} in {timeout:?}:\n{}",
-                self.log_text()
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+/// A running `deard` replaying `samples/demo` in a loop at its recorded pace, alignment only,
+/// in the tests' root, once it serves.
+fn start_daemon(service: &str) -> Daemon {
+    let mut command = Command::new(deard());
+    command
+        .args(["--service", service, "--refine", "none", "--loop"])
+        .args([
+            "--pacing",
+            "timestamps",
+            "--stats-interval",
+            "1",
+            "--replay",
+        ])
+        .arg(demo_capture())
+        .env(dear_proto::IOX2_ROOT_ENV, iox2_root().join("iceoryx2"));
+    let mut daemon = Daemon::spawn_logging_to_temp(command);
+    daemon.wait_for_log("serving", Duration::from_secs(60));
+    daemon
 }
 
 /// Runs a compiled C program with the tests' root and returns its output (killed after 120 s).
@@ -209,13 +154,8 @@ fn run(binary: &Path, args: &[&str]) -> Output {
         .stderr(Stdio::piped())
         .spawn()
         .expect("run the C program");
-    let deadline = Instant::now() + Duration::from_secs(120);
-    while child.try_wait().unwrap().is_none() {
-        if Instant::now() > deadline {
-            let _ = child.kill();
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(20));
+    if wait_exit(&mut child, Duration::from_secs(120)).is_none() {
+        let _ = child.kill();
     }
     child.wait_with_output().unwrap()
 }
@@ -313,7 +253,7 @@ fn the_example_receives_frames_and_agrees_with_the_rust_sdk() {
     iox2_root();
     let receive = c_program("examples/receive.c");
     let service = unique_service("example");
-    let _daemon = Daemon::start(&service);
+    let _daemon = start_daemon(&service);
     let rust = RustClient::start(&service);
 
     let output = run(&receive, &[&service, "5", "20000"]);
@@ -433,7 +373,7 @@ fn frames_are_zero_copy_and_at_most_two_are_held() {
     iox2_root();
     let c_api = c_program("tests/c_api.c");
     let service = unique_service("frames");
-    let daemon = Daemon::start(&service);
+    let daemon = start_daemon(&service);
     let output = run(&c_api, &["frames", &service]);
     assert!(
         output.status.success(),

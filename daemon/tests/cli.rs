@@ -3,6 +3,8 @@
 
 use std::process::Command;
 
+use dear_test_support::process::{output_within, unique_service};
+
 fn deard(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_deard"))
         .args(args)
@@ -129,25 +131,18 @@ fn print_config_to_a_full_device_fails_cleanly() {
 /// Runs `deard ARGS` and requires it to end by itself within 30 s (a daemon blocked on a FIFO
 /// would not: it is killed and the test fails).
 fn deard_within(args: &[&str]) -> std::process::Output {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_deard"))
+    let child = Command::new(env!("CARGO_BIN_EXE_deard"))
         .args(args)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .expect("run deard");
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
-    while child.try_wait().unwrap().is_none() {
-        if std::time::Instant::now() > deadline {
-            let _ = child.kill();
-            let out = child.wait_with_output().unwrap();
-            panic!(
-                "deard {args:?} still running after 30 s: {}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    child.wait_with_output().unwrap()
+    output_within(
+        child,
+        &format!("deard {args:?}"),
+        std::time::Duration::from_secs(30),
+        || {},
+    )
 }
 
 fn mkfifo(path: &std::path::Path) {
@@ -191,7 +186,7 @@ fn a_bundle_that_is_a_file_or_holds_a_fifo_is_refused_by_name() {
     let tmp = tempfile::tempdir().unwrap();
     let file = tmp.path().join("bundle-file");
     std::fs::write(&file, "x").unwrap();
-    let service = format!("dear-test/{}/bundle-kind/frames", std::process::id());
+    let service = unique_service("bundle-kind");
     let run = |bundle: &std::path::Path| {
         let bundle = bundle.to_str().unwrap();
         deard_within(&[
@@ -225,7 +220,7 @@ fn a_bundle_that_is_a_file_or_holds_a_fifo_is_refused_by_name() {
 #[test]
 fn an_end_beyond_the_capture_is_logged() {
     let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
-    let service = format!("dear-test/{}/end-beyond/frames", std::process::id());
+    let service = unique_service("end-beyond");
     let out = Command::new(env!("CARGO_BIN_EXE_deard"))
         .args(["--replay", demo, "--refine", "none", "--pacing", "fast"])
         .args(["--exit-when-done", "--end", "1000", "--service", &service])

@@ -3,6 +3,7 @@
 
 use std::process::Command;
 
+use dear_test_support::process::unique_service;
 use deard::config::Config;
 
 mod support;
@@ -245,10 +246,7 @@ fn a_bad_rust_log_is_refused_by_name() {
     let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
     let out = Command::new(env!("CARGO_BIN_EXE_deard"))
         .args(["--replay", demo, "--exit-when-done", "--refine", "none"])
-        .args([
-            "--service",
-            &format!("dear-test/{}/rust-log/frames", std::process::id()),
-        ])
+        .args(["--service", &unique_service("rust-log")])
         .env("RUST_LOG", "inof")
         .output()
         .unwrap();

@@ -6,6 +6,7 @@
 use std::process::Command;
 
 use dear_pipeline::capture::CaptureDir;
+use dear_test_support::process::unique_service;
 
 #[test]
 fn a_recording_of_a_replay_holds_the_same_sensor_frames() {
@@ -23,10 +24,7 @@ fn a_recording_of_a_replay_holds_the_same_sensor_frames() {
             "--exit-when-done",
         ])
         .args(["--end", "6", "--record", rec.to_str().unwrap()])
-        .args([
-            "--service",
-            &format!("dear-test/{}/record/frames", std::process::id()),
-        ])
+        .args(["--service", &unique_service("record")])
         .output()
         .expect("run deard");
     let log = String::from_utf8_lossy(&out.stderr);
@@ -61,10 +59,7 @@ fn a_record_directory_with_files_in_it_stops_the_daemon_naming_it() {
     let out = Command::new(env!("CARGO_BIN_EXE_deard"))
         .args(["--replay", demo, "--refine", "none", "--exit-when-done"])
         .args(["--record", tmp.path().to_str().unwrap()])
-        .args([
-            "--service",
-            &format!("dear-test/{}/record-busy/frames", std::process::id()),
-        ])
+        .args(["--service", &unique_service("record-busy")])
         .output()
         .expect("run deard");
     let log = String::from_utf8_lossy(&out.stderr);
@@ -123,10 +118,7 @@ fn depth_beyond_the_unambiguous_range_is_marked_invalid_and_counted() {
         .arg(&capture)
         .args(["--refine", "none", "--pacing", "fast", "--exit-when-done"])
         .args(["--record", rec.to_str().unwrap()])
-        .args([
-            "--service",
-            &format!("dear-test/{}/beyond-range/frames", std::process::id()),
-        ])
+        .args(["--service", &unique_service("beyond-range")])
         .output()
         .expect("run deard");
     let log = String::from_utf8_lossy(&out.stderr);

@@ -4,167 +4,62 @@
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use dear_pipeline::capture::{CaptureDir, FramePaths};
+use dear_capture::{CaptureDir, FramePaths};
+use dear_test_support::capture::write_demo_copies;
+use dear_test_support::daemon::Daemon;
+use dear_test_support::paths::demo_capture;
+use dear_test_support::process::unique_service;
 
 /// Generous bound for a liveness check (the daemon polls its shutdown flag every 100 ms).
 const STOP_WITHIN: Duration = Duration::from_secs(5);
 
-fn demo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../samples/demo")
+/// `deard --service <service> --refine none --replay <capture> <args…>`, its log in `log`.
+fn start(service: &str, capture: &Path, args: &[&str], log: &Path) -> Daemon {
+    start_with_env(service, capture, args, log, &[])
 }
 
-/// A unique service name per test and process, so tests can run in parallel.
-fn unique_service(test: &str) -> String {
-    format!("dear-test/{}/{test}/frames", std::process::id())
-}
-
-/// Writes a capture directory at `root` with one entry per `(timestamp_ns, readable)`: readable
-/// frames are copies of `samples/demo`'s first frame, unreadable ones have a truncated depth
-/// PNG (and their other files), so reading them fails.
-fn write_capture(root: &Path, frames: &[(u64, bool)]) -> PathBuf {
-    let demo = CaptureDir::open(demo()).expect("samples/demo opens");
-    let source = demo.frame_paths(0);
-    let mut manifest = demo.manifest().clone();
-    let template = manifest.frames[0].clone();
-    manifest.frames.clear();
-    std::fs::create_dir_all(root.join("frames")).unwrap();
-    for (id, &(timestamp_ns, readable)) in frames.iter().enumerate() {
-        let paths = FramePaths::new(root, id as u64);
-        for (from, to) in [
-            (&source.rgb, &paths.rgb),
-            (&source.amplitude, &paths.amplitude),
-            (&source.depth, &paths.depth),
-        ] {
-            std::fs::copy(from, to).unwrap();
-        }
-        if !readable {
-            std::fs::write(&paths.depth, b"\x89PNG truncated").unwrap();
-        }
-        let mut entry = template.clone();
-        entry.id = id as u64;
-        entry.timestamp_ns = timestamp_ns;
-        manifest.frames.push(entry);
-    }
-    std::fs::write(
-        root.join("capture.json"),
-        serde_json::to_string_pretty(&manifest).unwrap(),
-    )
-    .unwrap();
-    root.to_path_buf()
-}
-
-/// A running `deard`, killed with SIGKILL on drop if a test left it running.
-struct Daemon {
-    child: Child,
-    log: PathBuf,
-}
-
-impl Daemon {
-    fn start(service: &str, capture: &Path, args: &[&str], log: &Path) -> Daemon {
-        Self::start_with_env(service, capture, args, log, &[])
-    }
-
-    /// [`start`](Self::start) with extra environment variables.
-    fn start_with_env(
-        service: &str,
-        capture: &Path,
-        args: &[&str],
-        log: &Path,
-        env: &[(&str, &Path)],
-    ) -> Daemon {
-        let child = Command::new(env!("CARGO_BIN_EXE_deard"))
-            .args(["--service", service, "--refine", "none", "--replay"])
-            .arg(capture)
-            .args(args)
-            .envs(env.iter().copied())
-            .env("RUST_LOG", "info")
-            .stdout(Stdio::null())
-            .stderr(File::create(log).unwrap())
-            .spawn()
-            .expect("spawn deard");
-        Daemon {
-            child,
-            log: log.to_path_buf(),
-        }
-    }
-
-    fn log_text(&self) -> String {
-        std::fs::read_to_string(&self.log).unwrap_or_default()
-    }
-
-    /// Waits until the log contains `needle` (panics after `timeout`).
-    fn wait_for_log(&mut self, needle: &str, timeout: Duration) {
-        let deadline = Instant::now() + timeout;
-        while !self.log_text().contains(needle) {
-            if let Ok(Some(status)) = self.child.try_wait() {
-                panic!(
-                    "deard exited ({status}) before logging {needle:?}:\n{}",
-                    self.log_text()
-                );
-            }
-            assert!(
-                Instant::now() < deadline,
-                "deard did not log {needle:?} within {timeout:?}:\n{}",
-                self.log_text()
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-
-    fn signal(&self, signal: &str) {
-        let status = Command::new("kill")
-            .args([signal, &self.child.id().to_string()])
-            .status()
-            .expect("run kill");
-        assert!(status.success(), "kill {signal} failed");
-    }
-
-    /// The exit status, waiting up to `timeout`.
-    fn wait(&mut self, timeout: Duration) -> Option<ExitStatus> {
-        let deadline = Instant::now() + timeout;
-        loop {
-            if let Ok(Some(status)) = self.child.try_wait() {
-                return Some(status);
-            }
-            if Instant::now() >= deadline {
-                return None;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        if matches!(self.child.try_wait(), Ok(None)) {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-    }
+/// [`start`] with extra environment variables.
+fn start_with_env(
+    service: &str,
+    capture: &Path,
+    args: &[&str],
+    log: &Path,
+    env: &[(&str, &Path)],
+) -> Daemon {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_deard"));
+    command
+        .args(["--service", service, "--refine", "none", "--replay"])
+        .arg(capture)
+        .args(args)
+        .envs(env.iter().copied());
+    Daemon::spawn(command, log)
 }
 
 #[test]
 fn sigterm_stops_a_replay_waiting_for_a_distant_timestamp() {
     let tmp = tempfile::tempdir().unwrap();
     // The second frame is due an hour after the first: the capture thread waits for it.
-    let capture = write_capture(
+    let capture = write_demo_copies(
         &tmp.path().join("cap"),
         &[(0, true), (3_600_000_000_000, true)],
     );
-    let mut daemon = Daemon::start(
+    let mut daemon = start(
         &unique_service("sigterm-pacing"),
         &capture,
-        &["--pacing", "timestamps"],
+        &["--pacing", "timestamps", "--stats-interval", "0.05"],
         &tmp.path().join("deard.log"),
     );
     daemon.wait_for_log("serving", Duration::from_secs(60));
-    // Let the first frame through, so the capture thread is waiting for the second.
-    std::thread::sleep(Duration::from_millis(500));
+    // The first frame published: the capture thread has handed it over and waits for the
+    // second.
+    daemon.wait_for_counts("the first frame published", Duration::from_secs(60), |c| {
+        c.published >= 1
+    });
     let sent = Instant::now();
-    daemon.signal("-TERM");
+    daemon.signal(libc::SIGTERM);
     let status = daemon.wait(STOP_WITHIN).unwrap_or_else(|| {
         panic!(
             "deard still running {STOP_WITHIN:?} after SIGTERM:\n{}",
@@ -187,8 +82,8 @@ fn sigterm_stops_a_replay_waiting_for_a_distant_timestamp() {
 #[test]
 fn a_looping_replay_with_no_readable_frame_stops_with_an_error_instead_of_spinning() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = write_capture(&tmp.path().join("cap"), &[(0, false), (33_000_000, false)]);
-    let mut daemon = Daemon::start(
+    let capture = write_demo_copies(&tmp.path().join("cap"), &[(0, false), (33_000_000, false)]);
+    let mut daemon = start(
         &unique_service("loop-all-bad"),
         &capture,
         &["--loop", "--pacing", "fast"],
@@ -215,7 +110,7 @@ fn a_looping_replay_with_no_readable_frame_stops_with_an_error_instead_of_spinni
 #[test]
 fn a_replay_with_no_readable_frame_exits_non_zero() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = write_capture(&tmp.path().join("cap"), &[(0, false), (33_000_000, false)]);
+    let capture = write_demo_copies(&tmp.path().join("cap"), &[(0, false), (33_000_000, false)]);
     // With and without exit_when_done: a service with nothing to serve is a failure either way.
     for (name, args) in [
         (
@@ -225,7 +120,7 @@ fn a_replay_with_no_readable_frame_exits_non_zero() {
         ("all-bad-stay", &["--pacing", "fast"][..]),
     ] {
         let log = tmp.path().join(format!("{name}.log"));
-        let mut daemon = Daemon::start(&unique_service(name), &capture, args, &log);
+        let mut daemon = start(&unique_service(name), &capture, args, &log);
         let status = daemon.wait(Duration::from_secs(30)).unwrap_or_else(|| {
             panic!(
                 "{name}: deard kept running with nothing to serve:\n{}",
@@ -245,24 +140,36 @@ fn a_replay_with_no_readable_frame_exits_non_zero() {
 #[test]
 fn a_looping_replay_with_some_readable_frames_keeps_serving() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = write_capture(
+    let capture = write_demo_copies(
         &tmp.path().join("cap"),
         &[(0, false), (33_000_000, true), (66_000_000, false)],
     );
-    let mut daemon = Daemon::start(
+    let mut daemon = start(
         &unique_service("loop-some-bad"),
         &capture,
-        &["--loop", "--pacing", "timestamps"],
+        &[
+            "--loop",
+            "--pacing",
+            "timestamps",
+            "--stats-interval",
+            "0.05",
+        ],
         &tmp.path().join("deard.log"),
     );
     daemon.wait_for_log("serving", Duration::from_secs(60));
-    std::thread::sleep(Duration::from_millis(1500));
+    // Its one readable frame published three times: the replay went past the capture's end
+    // (where one with no readable frame stops) twice.
+    daemon.wait_for_counts(
+        "three passes over the capture (published=3)",
+        Duration::from_secs(60),
+        |c| c.published >= 3,
+    );
     assert!(
         daemon.wait(Duration::ZERO).is_none(),
         "still serving:\n{}",
         daemon.log_text()
     );
-    daemon.signal("-TERM");
+    daemon.signal(libc::SIGTERM);
     let status = daemon.wait(STOP_WITHIN).expect("stops on SIGTERM");
     assert!(status.success(), "{status}\n{}", daemon.log_text());
 }
@@ -274,16 +181,16 @@ fn a_looping_replay_with_some_readable_frames_keeps_serving() {
 fn a_second_daemon_on_the_same_service_refuses_to_start() {
     let tmp = tempfile::tempdir().unwrap();
     let service = unique_service("single-instance");
-    let mut first = Daemon::start(
+    let mut first = start(
         &service,
-        &demo(),
+        &demo_capture(),
         &["--loop"],
         &tmp.path().join("first.log"),
     );
     first.wait_for_log("serving", Duration::from_secs(60));
-    let mut second = Daemon::start(
+    let mut second = start(
         &service,
-        &demo(),
+        &demo_capture(),
         &["--loop"],
         &tmp.path().join("second.log"),
     );
@@ -303,11 +210,11 @@ fn a_second_daemon_on_the_same_service_refuses_to_start() {
         first.log_text()
     );
 
-    first.signal("-KILL");
+    first.signal(libc::SIGKILL);
     first.wait(STOP_WITHIN).expect("killed");
-    let mut third = Daemon::start(
+    let mut third = start(
         &service,
-        &demo(),
+        &demo_capture(),
         &["--loop"],
         &tmp.path().join("third.log"),
     );
@@ -315,7 +222,7 @@ fn a_second_daemon_on_the_same_service_refuses_to_start() {
     // asserted: any iceoryx2 node created meanwhile — a client, another test's daemon — cleans
     // up dead nodes too.)
     third.wait_for_log("serving", Duration::from_secs(60));
-    third.signal("-TERM");
+    third.signal(libc::SIGTERM);
     assert!(third.wait(STOP_WITHIN).expect("stops").success());
 }
 
@@ -332,18 +239,16 @@ fn the_daemon_notifies_systemd_and_pings_its_watchdog() {
         .set_read_timeout(Some(Duration::from_secs(60)))
         .unwrap();
     let log = tmp.path().join("deard.log");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_deard"))
+    let mut command = Command::new(env!("CARGO_BIN_EXE_deard"));
+    command
         .args(["--service", &unique_service("watchdog"), "--refine", "none"])
         .arg("--replay")
-        .arg(demo())
+        .arg(demo_capture())
         .arg("--loop")
         .env("NOTIFY_SOCKET", &socket_path)
         // A 0.4 s watchdog: pings every 0.2 s.
-        .env("WATCHDOG_USEC", "400000")
-        .stdout(Stdio::null())
-        .stderr(File::create(&log).unwrap())
-        .spawn()
-        .expect("spawn deard");
+        .env("WATCHDOG_USEC", "400000");
+    let mut daemon = Daemon::spawn(command, &log);
     let mut buf = [0u8; 4096];
     let mut receive = || {
         let n = socket.recv(&mut buf).expect("a notification");
@@ -361,10 +266,7 @@ fn the_daemon_notifies_systemd_and_pings_its_watchdog() {
     // Ten pings at 0.2 s take about 2 s; far fewer than 20 s, or the pings are not periodic.
     let elapsed = start.elapsed();
     assert!(elapsed < Duration::from_secs(20), "{elapsed:?}");
-    Command::new("kill")
-        .args(["-TERM", &child.id().to_string()])
-        .status()
-        .unwrap();
+    daemon.signal(libc::SIGTERM);
     loop {
         let message = receive();
         if message.contains("STOPPING=1") {
@@ -372,7 +274,7 @@ fn the_daemon_notifies_systemd_and_pings_its_watchdog() {
         }
         assert!(message.contains("WATCHDOG=1"), "{message:?}");
     }
-    assert!(child.wait().unwrap().success());
+    assert!(daemon.child.wait().unwrap().success());
 }
 
 /// What a crashed daemon left in shared memory is removed when the next one starts, and the
@@ -385,9 +287,9 @@ fn the_cleanup_after_a_crashed_daemon_is_reported() {
     let root = tmp.path().join("iceoryx2");
     let env = [("DEAR_IOX2_ROOT", root.as_path())];
     let service = unique_service("cleanup-report");
-    let mut crashed = Daemon::start_with_env(
+    let mut crashed = start_with_env(
         &service,
-        &demo(),
+        &demo_capture(),
         &["--loop"],
         &tmp.path().join("crashed.log"),
         &env,
@@ -400,11 +302,11 @@ fn the_cleanup_after_a_crashed_daemon_is_reported() {
         "nothing to remove in a fresh root:\n{}",
         crashed.log_text()
     );
-    crashed.signal("-KILL");
+    crashed.signal(libc::SIGKILL);
     crashed.wait(STOP_WITHIN).expect("killed");
-    let mut next = Daemon::start_with_env(
+    let mut next = start_with_env(
         &service,
-        &demo(),
+        &demo_capture(),
         &["--loop"],
         &tmp.path().join("next.log"),
         &env,
@@ -418,7 +320,7 @@ fn the_cleanup_after_a_crashed_daemon_is_reported() {
         }),
         "{log}"
     );
-    next.signal("-TERM");
+    next.signal(libc::SIGTERM);
     assert!(next.wait(STOP_WITHIN).expect("stops").success());
 }
 
@@ -435,7 +337,7 @@ fn a_full_disk_under_the_log_does_not_stop_the_daemon() {
             "none",
         ])
         .arg("--replay")
-        .arg(demo())
+        .arg(demo_capture())
         .args([
             "--pacing",
             "fast",
@@ -456,13 +358,13 @@ fn a_full_disk_under_the_log_does_not_stop_the_daemon() {
 #[test]
 fn a_fifo_as_a_frame_file_is_skipped_by_name() {
     let tmp = tempfile::tempdir().unwrap();
-    let capture = write_capture(&tmp.path().join("cap"), &[(0, true), (1, true), (2, true)]);
+    let capture = write_demo_copies(&tmp.path().join("cap"), &[(0, true), (1, true), (2, true)]);
     let rgb = FramePaths::new(&capture, 1).rgb;
     std::fs::remove_file(&rgb).unwrap();
     let status = Command::new("mkfifo").arg(&rgb).status().unwrap();
     assert!(status.success());
     let log = tmp.path().join("deard.log");
-    let mut daemon = Daemon::start(
+    let mut daemon = start(
         &unique_service("fifo-frame"),
         &capture,
         &["--pacing", "fast", "--exit-when-done"],
@@ -508,9 +410,9 @@ fn a_recording_that_fills_its_disk_fails_loudly_and_replays() {
     let _unmount = Unmount(mnt.clone());
     let rec = mnt.join("rec");
     let log = tmp.path().join("deard.log");
-    let mut daemon = Daemon::start(
+    let mut daemon = start(
         &unique_service("record-enospc"),
-        &demo(),
+        &demo_capture(),
         &["--loop", "--record", rec.to_str().unwrap()],
         &log,
     );
@@ -534,7 +436,7 @@ fn a_recording_that_fills_its_disk_fails_loudly_and_replays() {
     for k in 0..recorded.len() {
         recorded.read_frame(k).expect("every listed frame is whole");
     }
-    daemon.signal("-TERM");
+    daemon.signal(libc::SIGTERM);
     let status = daemon.wait(STOP_WITHIN).expect("deard stops on SIGTERM");
     let text = daemon.log_text();
     assert!(

@@ -39,7 +39,7 @@ fn the_data_segment_holds_the_protocols_samples_and_payloads_are_aligned() {
         .config(&config)
         .create::<Transport>()
         .unwrap();
-    let name = format!("dear-test/{}/shm-size/frames", std::process::id());
+    let name = dear_test_support::process::unique_service("shm-size");
     let service = frame_service(&node, &name).unwrap();
     let publisher = service
         .publisher_builder()

@@ -1,10 +1,10 @@
-//! Helpers of the end-to-end tests: analytic test captures, test bundles, the expected pipeline
-//! output of a frame, and process handling for `deard` and the probe client.
+//! Helpers of the end-to-end tests: test bundles, the expected pipeline output of a frame, and
+//! the `deard` command line and probe client of these tests. What every crate's tests share
+//! (the daemon handle, log waits, test captures) is in `dear-test-support`.
 
 pub mod bundles;
 pub mod engines;
 pub mod processes;
-pub mod scene;
 
 /// Hex SHA-256 of bytes (what the probe prints for each frame's payload): the bundle
 /// format's digest.

@@ -1,139 +1,23 @@
-//! Starting and stopping the real binaries (`deard`, `dear-probe`) and reading their output.
+//! Starting the real binaries of the end-to-end tests (`deard`, `dear-probe`) and reading the
+//! probe's output. The daemon handle, its log waits and counters are the workspace's
+//! ([`dear_test_support::daemon`]).
 
-use std::fs::File;
-use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdout, Command, Stdio};
+use std::ffi::OsStr;
+use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
-use std::thread;
 use std::time::Duration;
 
-/// The directory holding the workspace's binaries (`target/<profile>`), found from the running
-/// test executable (`target/<profile>/deps/<test>`).
-pub fn bin_dir() -> PathBuf {
-    let exe = std::env::current_exe().expect("current exe");
-    let deps = exe.parent().expect("deps dir");
-    deps.parent().expect("profile dir").to_path_buf()
-}
+use dear_test_support::paths::binary;
+use dear_test_support::process::{lines, signal, wait_exit};
 
-/// Path of a workspace binary; panics with instructions if it was not built.
-pub fn binary(name: &str) -> PathBuf {
-    let path = bin_dir().join(name);
-    assert!(
-        path.is_file(),
-        "{} not found: build the workspace binaries first (`cargo test --workspace` or `cargo build --workspace`)",
-        path.display()
-    );
-    path
-}
-
-/// A unique service name per test and process, so tests can run in parallel.
-pub fn unique_service(test: &str) -> String {
-    format!("dear-test/{}/{test}/frames", std::process::id())
-}
-
-/// A running `deard`; killed (SIGKILL) on drop if still running.
-pub struct Daemon {
-    pub child: Child,
-    pub log: PathBuf,
-}
-
-impl Daemon {
-    /// Starts `deard --service <service> <args...>` with its log in `log`.
-    pub fn start<S: AsRef<std::ffi::OsStr>>(service: &str, args: &[S], log: &Path) -> Daemon {
-        Daemon::start_in(None, service, args, log)
-    }
-
-    /// [`Daemon::start`] with `DEAR_IOX2_ROOT` set to `root` (when given).
-    pub fn start_in<S: AsRef<std::ffi::OsStr>>(
-        root: Option<&Path>,
-        service: &str,
-        args: &[S],
-        log: &Path,
-    ) -> Daemon {
-        let log_file = File::create(log).expect("daemon log file");
-        let mut command = Command::new(binary("deard"));
-        if let Some(root) = root {
-            command.env(dear_proto::IOX2_ROOT_ENV, root);
-        }
-        let child = command
-            .args(["--service", service, "--stats-interval", "1"])
-            .args(args)
-            .env("RUST_LOG", "info")
-            .stdout(Stdio::null())
-            .stderr(log_file)
-            .spawn()
-            .expect("spawn deard");
-        Daemon {
-            child,
-            log: log.to_path_buf(),
-        }
-    }
-
-    /// Sends SIGTERM and waits for the exit status (up to `timeout`).
-    pub fn terminate(&mut self, timeout: Duration) -> Option<std::process::ExitStatus> {
-        signal(&self.child, libc::SIGTERM);
-        wait_timeout(&mut self.child, timeout)
-    }
-
-    /// Kills with SIGKILL, as a crash would.
-    pub fn crash(&mut self) {
-        signal(&self.child, libc::SIGKILL);
-        let _ = self.child.wait();
-    }
-
-    /// Whether the process is still running.
-    pub fn is_running(&mut self) -> bool {
-        matches!(self.child.try_wait(), Ok(None))
-    }
-
-    /// The daemon's log so far.
-    pub fn log_text(&self) -> String {
-        std::fs::read_to_string(&self.log).unwrap_or_default()
-    }
-
-    /// The first log line containing `needle`, waiting up to `timeout` for it to be written.
-    pub fn wait_for_log_line(&self, needle: &str, timeout: Duration) -> Option<String> {
-        let deadline = std::time::Instant::now() + timeout;
-        loop {
-            if let Some(line) = self.log_text().lines().find(|l| l.contains(needle)) {
-                return Some(line.to_string());
-            }
-            if std::time::Instant::now() >= deadline {
-                return None;
-            }
-            thread::sleep(Duration::from_millis(20));
-        }
-    }
-
-    /// The counters of the replay, from the `source finished` line `deard` logs when a
-    /// non-looping replay has been published (it keeps serving afterwards), waiting up to
-    /// `timeout`. Panics with the log if the line does not come.
-    pub fn wait_source_finished(&self, timeout: Duration) -> Counts {
-        let line = self
-            .wait_for_log_line("source finished", timeout)
-            .unwrap_or_else(|| panic!("deard did not finish its replay:\n{}", self.log_text()));
-        Counts::parse(&line).unwrap_or_else(|| panic!("no counters in {line:?}"))
-    }
-
-    /// The final counters, from the `stopped` line `deard` logs as it exits (call after
-    /// [`Daemon::terminate`]). Panics with the log if there is none.
-    pub fn final_counts(&self) -> Counts {
-        let log = self.log_text();
-        log.lines()
-            .rev()
-            .find(|l| l.contains("stopped published="))
-            .and_then(Counts::parse)
-            .unwrap_or_else(|| panic!("no final statistics in the deard log:\n{log}"))
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        if self.is_running() {
-            self.crash();
-        }
-    }
+/// The command line of the workspace's `deard` serving `service` with a statistics line every
+/// second and `args` after that, for [`dear_test_support::daemon::Daemon::spawn`].
+pub fn deard<S: AsRef<OsStr>>(service: &str, args: &[S]) -> Command {
+    let mut command = Command::new(binary("deard"));
+    command
+        .args(["--service", service, "--stats-interval", "1"])
+        .args(args);
+    command
 }
 
 /// A running `dear-probe` whose lines arrive on a channel.
@@ -171,7 +55,7 @@ impl Probe {
         let mut child = Probe::command(service, count, delay)
             .spawn()
             .expect("spawn dear-probe");
-        let lines = reader_thread(child.stdout.take().expect("probe stdout"));
+        let lines = lines(child.stdout.take().expect("probe stdout"));
         let probe = Probe { child, lines };
         let first = probe
             .lines
@@ -207,7 +91,7 @@ impl Probe {
             .stderr(Stdio::piped())
             .spawn()
             .expect("spawn dear-probe");
-        let lines = reader_thread(child.stdout.take().expect("probe stdout"));
+        let lines = lines(child.stdout.take().expect("probe stdout"));
         let mut probe = Probe { child, lines };
         if let Ok(first) = probe.lines.recv_timeout(Duration::from_secs(30)) {
             assert_eq!(first, "ready");
@@ -256,7 +140,7 @@ impl Probe {
 
     /// Waits for the probe to exit and returns whether it succeeded.
     pub fn finish(&mut self, timeout: Duration) -> bool {
-        wait_timeout(&mut self.child, timeout)
+        wait_exit(&mut self.child, timeout)
             .map(|s| s.success())
             .unwrap_or(false)
     }
@@ -324,70 +208,4 @@ pub fn lost_by_sequence(frames: &[Seen]) -> u64 {
         lost += b.sequence - a.sequence - 1;
     }
     lost
-}
-
-/// Counters from a `deard` statistics line (`published=… skipped=… dropped=…`, as `deard` logs
-/// them when stderr is not a terminal).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Counts {
-    /// Samples sent (`FrameHeader::sequence` of the last one + 1 when no send failed).
-    pub published: u64,
-    /// Input frames refused as bad.
-    pub skipped: u64,
-    /// Input frames the capture queue dropped because processing fell behind.
-    pub dropped: u64,
-}
-
-impl Counts {
-    /// The counters of a log line, `None` if it lacks one of them.
-    pub fn parse(line: &str) -> Option<Counts> {
-        let field = |key: &str| -> Option<u64> {
-            line.split_whitespace()
-                .find_map(|word| word.strip_prefix(key)?.strip_prefix('='))?
-                .parse()
-                .ok()
-        };
-        Some(Counts {
-            published: field("published")?,
-            skipped: field("skipped")?,
-            dropped: field("dropped")?,
-        })
-    }
-}
-
-fn reader_thread(stdout: ChildStdout) -> mpsc::Receiver<String> {
-    let (tx, rx) = mpsc::channel();
-    thread::spawn(move || {
-        for line in BufReader::new(stdout).lines() {
-            match line {
-                Ok(line) => {
-                    if tx.send(line).is_err() {
-                        break;
-                    }
-                }
-                Err(_) => break,
-            }
-        }
-    });
-    rx
-}
-
-fn signal(child: &Child, sig: i32) {
-    // SAFETY: sending a signal to our own child's pid has no memory-safety implications.
-    unsafe {
-        libc::kill(child.id() as i32, sig);
-    }
-}
-
-fn wait_timeout(child: &mut Child, timeout: Duration) -> Option<std::process::ExitStatus> {
-    let deadline = std::time::Instant::now() + timeout;
-    loop {
-        if let Ok(Some(status)) = child.try_wait() {
-            return Some(status);
-        }
-        if std::time::Instant::now() >= deadline {
-            return None;
-        }
-        thread::sleep(Duration::from_millis(20));
-    }
 }

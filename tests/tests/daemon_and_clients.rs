@@ -12,11 +12,12 @@ use std::collections::BTreeMap;
 use std::time::Duration;
 
 use dear_e2e_tests::engines::Engine;
-use dear_e2e_tests::processes::{
-    lost_by_sequence, split_runs, unique_service, Counts, Daemon, Probe, Seen,
-};
-use dear_e2e_tests::{expected_payload_hashes, scene};
+use dear_e2e_tests::expected_payload_hashes;
+use dear_e2e_tests::processes::{deard, lost_by_sequence, split_runs, Probe, Seen};
 use dear_proto::flags;
+use dear_test_support::daemon::{Counts, Daemon};
+use dear_test_support::process::unique_service;
+use dear_test_support::scene;
 
 const W: u32 = 160;
 const H: u32 = 120;
@@ -144,9 +145,8 @@ fn with_a_bundle_the_daemon_publishes_the_dear_chain_output_with_online_calibrat
     let readable: Vec<u64> = expected.keys().copied().collect();
     let service = unique_service("dear-bundle");
     let probe = Probe::start(&service, 1000);
-    let mut daemon = Daemon::start(
-        &service,
-        &engine.replay_fast(capture.root()),
+    let mut daemon = Daemon::spawn(
+        deard(&service, &engine.replay_fast(capture.root())),
         &tmp.path().join("deard.log"),
     );
     let finished = daemon.wait_source_finished(WAIT);
@@ -200,21 +200,23 @@ fn with_the_network_in_the_background_no_frame_waits_and_measurements_arrive() {
     let service = unique_service("dear-background");
     let limit = 900;
     let probe = Probe::start(&service, limit);
-    let mut daemon = Daemon::start(
-        &service,
-        &[
-            "--refine",
-            "dear",
-            "--bundle",
-            bundle.to_str().unwrap(),
-            "--online-interval",
-            "3",
-            "--pacing",
-            "timestamps",
-            "--loop",
-            "--replay",
-            capture.root().to_str().unwrap(),
-        ],
+    let mut daemon = Daemon::spawn(
+        deard(
+            &service,
+            &[
+                "--refine",
+                "dear",
+                "--bundle",
+                bundle.to_str().unwrap(),
+                "--online-interval",
+                "3",
+                "--pacing",
+                "timestamps",
+                "--loop",
+                "--replay",
+                capture.root().to_str().unwrap(),
+            ],
+        ),
         &tmp.path().join("deard.log"),
     );
     let want = flags::ALIGNED | flags::REFINED_NETWORK | flags::CALIBRATION_ONLINE;
@@ -269,9 +271,8 @@ fn two_clients_receive_the_frames_in_order_with_the_pipeline_output() {
     let a = Probe::start(&service, 1000);
     let b = Probe::start(&service, 1000);
     // Fast pacing: the capture queue blocks, so the publisher must send all 12 frames.
-    let mut daemon = Daemon::start(
-        &service,
-        &Engine::classical().replay_fast(capture.root()),
+    let mut daemon = Daemon::spawn(
+        deard(&service, &Engine::classical().replay_fast(capture.root())),
         &tmp.path().join("deard.log"),
     );
     let finished = daemon.wait_source_finished(WAIT);
@@ -331,9 +332,8 @@ fn a_slow_client_loses_only_its_own_oldest_frames_and_counts_them() {
     // client could read them, so it must lose some; were the daemon to block for it instead,
     // the replay would take 6 s and nothing would be lost.
     let slow = Probe::start_with_delay(&service, 1000, Duration::from_millis(300));
-    let mut daemon = Daemon::start(
-        &service,
-        &Engine::classical().replay_fast(capture.root()),
+    let mut daemon = Daemon::spawn(
+        deard(&service, &Engine::classical().replay_fast(capture.root())),
         &tmp.path().join("deard.log"),
     );
     let finished = daemon.wait_source_finished(WAIT);
@@ -375,16 +375,18 @@ fn killing_a_client_disturbs_neither_the_daemon_nor_the_other_client() {
     let service = unique_service("kill-client");
     let survivor = Probe::start(&service, 1000);
     let mut victim = Probe::start(&service, 1000);
-    let mut daemon = Daemon::start(
-        &service,
-        &[
-            "--refine",
-            "classical",
-            "--pacing",
-            "timestamps",
-            "--replay",
-            capture.root().to_str().unwrap(),
-        ],
+    let mut daemon = Daemon::spawn(
+        deard(
+            &service,
+            &[
+                "--refine",
+                "classical",
+                "--pacing",
+                "timestamps",
+                "--replay",
+                capture.root().to_str().unwrap(),
+            ],
+        ),
         &tmp.path().join("deard.log"),
     );
     let before = victim.collect_until(|seen| seen.len() >= 5, WAIT);
@@ -446,9 +448,8 @@ fn a_restarted_daemon_is_picked_up_by_a_running_client() {
         "--replay",
         root,
     ];
-    let mut first = Daemon::start(
-        &service,
-        &[&args[..], &["--end", "8"]].concat(),
+    let mut first = Daemon::spawn(
+        deard(&service, &[&args[..], &["--end", "8"]].concat()),
         &tmp.path().join("deard1.log"),
     );
     let finished_first = first.wait_source_finished(WAIT);
@@ -461,9 +462,8 @@ fn a_restarted_daemon_is_picked_up_by_a_running_client() {
         .expect("frames of the first daemon")
         .run_id;
     first.crash();
-    let mut second = Daemon::start(
-        &service,
-        &[&args[..], &["--start", "8"]].concat(),
+    let mut second = Daemon::spawn(
+        deard(&service, &[&args[..], &["--start", "8"]].concat()),
         &tmp.path().join("deard2.log"),
     );
     let finished_second = second.wait_source_finished(WAIT);
@@ -542,9 +542,8 @@ fn bad_frames_are_skipped_counted_and_named() {
 
     let service = unique_service("bad-frames");
     let probe = Probe::start(&service, 1000);
-    let mut daemon = Daemon::start(
-        &service,
-        &Engine::classical().replay_fast(capture.root()),
+    let mut daemon = Daemon::spawn(
+        deard(&service, &Engine::classical().replay_fast(capture.root())),
         &tmp.path().join("deard.log"),
     );
     let finished = daemon.wait_source_finished(WAIT);

@@ -4,43 +4,15 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use dear_capture::{Calibration, CaptureManifest, CaptureWriter, GroundTruth, Intrinsics};
-use dear_e2e_tests::processes::binary;
-use dear_e2e_tests::scene;
-use ndarray::Array2;
+use dear_capture::Calibration;
+use dear_test_support::paths::binary;
+use dear_test_support::scene;
 
-const W: usize = 64;
-const H: usize = 48;
+const W: u32 = 64;
+const H: u32 = 48;
 
 fn fixture_bundle() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/bundles/smoke-edge")
-}
-
-/// A capture of the analytic scene; with `ground_truth`, each frame carries the noise-free
-/// depth as ground truth and a zero perturbation (an aligned capture, as `dear-synth
-/// generate` writes).
-fn write_capture(dir: &Path, frames: u64, ground_truth: bool) -> Vec<Array2<f32>> {
-    let mut manifest = CaptureManifest::new(
-        W as u32,
-        H as u32,
-        Intrinsics::from_hfov(W as u32, H as u32, 70.0),
-    );
-    manifest.initial_calibration = Calibration::default();
-    let mut writer = CaptureWriter::create(dir, manifest).expect("create capture");
-    let mut truths = Vec::new();
-    for i in 0..frames {
-        let frame = scene::frame(i, W, H);
-        let mut known = GroundTruth::default();
-        if ground_truth {
-            let truth = Array2::from_shape_fn((H, W), |(r, c)| scene::true_depth(i, W, H, r, c));
-            known.depth = Some(truth.clone());
-            known.perturbation = Some(Calibration::default());
-            truths.push(truth);
-        }
-        writer.write_sample(&frame, &known).expect("write frame");
-    }
-    writer.finish().expect("finish capture");
-    truths
 }
 
 fn dear_eval(args: &[&str]) -> Output {
@@ -56,7 +28,7 @@ fn eval_measures_baselines_and_a_bundle_and_writes_json_markdown_and_figures() {
     let tmp = tempfile::tempdir().unwrap();
     let capture = tmp.path().join("capture");
     let out = tmp.path().join("out");
-    write_capture(&capture, 4, true);
+    scene::write_capture_with_ground_truth(&capture, 4, W, H);
     let bundle = fixture_bundle();
     let result = dear_eval(&[
         "--capture",
@@ -170,7 +142,7 @@ fn eval_measures_baselines_and_a_bundle_and_writes_json_markdown_and_figures() {
     for f in figures {
         let path = out.join(f.as_str().unwrap());
         let img = image::open(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        assert!(img.width() >= W as u32 && img.height() >= H as u32);
+        assert!(img.width() >= W && img.height() >= H);
         assert!(markdown.contains(f.as_str().unwrap()));
     }
 }
@@ -179,7 +151,7 @@ fn eval_measures_baselines_and_a_bundle_and_writes_json_markdown_and_figures() {
 fn eval_rejects_a_capture_without_ground_truth_naming_the_frame() {
     let tmp = tempfile::tempdir().unwrap();
     let capture = tmp.path().join("capture");
-    write_capture(&capture, 2, false);
+    scene::write_capture(&capture, 2, W, H, Calibration::default());
     let result = dear_eval(&[
         "--capture",
         capture.to_str().unwrap(),

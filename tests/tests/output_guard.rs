@@ -148,9 +148,12 @@ fn the_shipped_bundle_passes_the_guard_on_every_sample_frame() {
 #[test]
 fn the_daemon_publishes_classically_refined_frames_when_the_network_is_broken() {
     use dear_e2e_tests::engines::Engine;
-    use dear_e2e_tests::processes::{unique_service, Daemon, Probe};
-    use dear_e2e_tests::{expected_payload_hashes, scene};
+    use dear_e2e_tests::expected_payload_hashes;
+    use dear_e2e_tests::processes::{deard, Probe};
     use dear_proto::flags;
+    use dear_test_support::daemon::Daemon;
+    use dear_test_support::process::unique_service;
+    use dear_test_support::scene;
     use std::time::Duration;
 
     const FRAMES: usize = 12;
@@ -170,9 +173,8 @@ fn the_daemon_publishes_classically_refined_frames_when_the_network_is_broken() 
     let expected = expected_payload_hashes(&capture, &engine.pipeline);
     let service = unique_service("broken-network");
     let probe = Probe::start(&service, 1000);
-    let mut daemon = Daemon::start(
-        &service,
-        &engine.replay_fast(capture.root()),
+    let mut daemon = Daemon::spawn(
+        deard(&service, &engine.replay_fast(capture.root())),
         &tmp.path().join("deard.log"),
     );
     // Every frame is published (fast pacing); the probe checks the ones it receives (the

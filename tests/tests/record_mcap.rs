@@ -3,12 +3,13 @@
 //! package with `mcap-protobuf-support` (`tests/scripts/read_mcap.py`, in the project's
 //! `.venv`, installed by `scripts/setup.sh` from `train/`'s dev extras).
 
-use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::Duration;
 
-use dear_e2e_tests::processes::{binary, unique_service, Daemon};
+use dear_test_support::daemon::Daemon;
+use dear_test_support::paths::{binary, demo_capture};
+use dear_test_support::process::{unique_service, wait_until};
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -40,8 +41,8 @@ fn python() -> PathBuf {
 /// private iceoryx2 root. (Its frames have every pixel valid, with `--refine none` too, so the
 /// valid-pixel comparison of read_mcap.py is a weak check on this capture.)
 fn start_daemon(service: &str, iox_root: &Path, log: &Path) -> Daemon {
-    let demo = root().join("samples/demo");
-    let child = Command::new(binary("deard"))
+    let mut command = Command::new(binary("deard"));
+    command
         .args([
             "--service",
             service,
@@ -50,17 +51,9 @@ fn start_daemon(service: &str, iox_root: &Path, log: &Path) -> Daemon {
             "--loop",
             "--replay",
         ])
-        .arg(&demo)
-        .env("DEAR_IOX2_ROOT", iox_root)
-        .env("RUST_LOG", "info")
-        .stdout(Stdio::null())
-        .stderr(File::create(log).expect("daemon log"))
-        .spawn()
-        .expect("spawn deard");
-    Daemon {
-        child,
-        log: log.to_path_buf(),
-    }
+        .arg(demo_capture())
+        .env("DEAR_IOX2_ROOT", iox_root);
+    Daemon::spawn(command, log)
 }
 
 fn record_command(service: &str, iox_root: &Path, file: &Path, extra: &[&str]) -> Command {
@@ -179,15 +172,12 @@ fn sigterm_ends_an_open_recording_with_a_finished_file() {
         .spawn()
         .expect("spawn dear record");
     // Until a few frames are in: the file grows past its header once the first chunk is out.
-    let deadline = std::time::Instant::now() + Duration::from_secs(60);
-    while std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0) < 64 * 1024 {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "the recording did not grow:\n{}",
-            daemon.log_text()
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    wait_until(
+        "the recording to grow past 64 KiB",
+        Duration::from_secs(60),
+        || std::fs::metadata(&file).map(|m| m.len()).unwrap_or(0) >= 64 * 1024,
+        || daemon.log_text(),
+    );
     // SAFETY: kill(2) on our own child's pid.
     assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGTERM) }, 0);
     let out = child.wait_with_output().expect("wait for dear record");

@@ -11,8 +11,10 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::time::Duration;
 
-use dear_e2e_tests::processes::{unique_service, Daemon, Probe};
-use dear_e2e_tests::scene;
+use dear_e2e_tests::processes::{deard, Probe};
+use dear_test_support::daemon::Daemon;
+use dear_test_support::process::{unique_service, wait_until};
+use dear_test_support::scene;
 
 const W: u32 = 160;
 const H: u32 = 120;
@@ -67,7 +69,9 @@ impl Setup {
     fn daemon(&self, service: &str, log: &str) -> Daemon {
         let capture = self.capture.to_str().unwrap().to_string();
         let args = ["--refine", "none", "--loop", "--replay", &capture];
-        Daemon::start_in(Some(&self.root), service, &args, &self.dir.join(log))
+        let mut command = deard(service, &args);
+        command.env(dear_proto::IOX2_ROOT_ENV, &self.root);
+        Daemon::spawn(command, &self.dir.join(log))
     }
 
     /// A client process as `uid` (with that user's group only), subscribed.
@@ -231,15 +235,12 @@ fn a_symbolic_link_in_the_root_is_removed_not_followed() {
     // One swapped in while the daemon serves is removed within a second too.
     let link = s.root.join("services").join("iox2_swapped.service");
     std::os::unix::fs::symlink(&elsewhere, &link).unwrap();
-    let deadline = std::time::Instant::now() + WAIT;
-    while std::fs::symlink_metadata(&link).is_ok() {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "{}",
-            daemon.log_text()
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_until(
+        "deard to remove the symbolic link",
+        WAIT,
+        || std::fs::symlink_metadata(&link).is_err(),
+        || daemon.log_text(),
+    );
     let line = daemon
         .wait_for_log_line("iox2_swapped.service", WAIT)
         .unwrap();
@@ -275,20 +276,18 @@ fn junk_in_the_node_counter_is_repaired_at_start_and_while_serving() {
 
     // Again while it serves: repaired within a second, then new clients connect.
     std::fs::write(&counters[0], junk).unwrap();
-    let deadline = std::time::Instant::now() + WAIT;
-    while daemon
-        .log_text()
-        .matches("node counter was damaged")
-        .count()
-        < 2
-    {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "{}",
-            daemon.log_text()
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    wait_until(
+        "deard to repair the node counter a second time",
+        WAIT,
+        || {
+            daemon
+                .log_text()
+                .matches("node counter was damaged")
+                .count()
+                >= 2
+        },
+        || daemon.log_text(),
+    );
     let probe = Probe::spawn({
         let mut c = Probe::command(&service, 1_000_000, Duration::ZERO);
         c.env(dear_proto::IOX2_ROOT_ENV, &s.root);
@@ -343,7 +342,7 @@ fn another_users_publisher_neither_locks_out_nor_impersonates_the_daemon() {
     }
     let s = setup(NOBODY);
     let service = unique_service("impostor");
-    let mut impostor = Command::new(dear_e2e_tests::processes::binary("dear-impostor"))
+    let mut impostor = Command::new(dear_test_support::paths::binary("dear-impostor"))
         .arg(&service)
         .env(dear_proto::IOX2_ROOT_ENV, &s.root)
         .uid(NOBODY)

@@ -4,62 +4,28 @@
 //!
 //! Needs `target/<profile>/deard` (built by `cargo test --workspace` or `cargo build`).
 
-use std::fs::File;
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
+use std::process::Command;
 use std::time::{Duration, Instant};
 
+use dear_test_support::daemon::Daemon;
+use dear_test_support::paths::{binary, demo_capture};
+use dear_test_support::process::unique_service;
 use dear_view::{ViewConfig, Viewer};
 
 const WAIT: Duration = Duration::from_secs(60);
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-/// `target/<profile>/deard`, next to this test's `deps/` directory.
-fn deard() -> PathBuf {
-    let exe = std::env::current_exe().unwrap();
-    let path = exe.parent().unwrap().parent().unwrap().join("deard");
-    assert!(
-        path.is_file(),
-        "{} not found: build the workspace first (`cargo test --workspace` or `cargo build`)",
-        path.display()
-    );
-    path
-}
-
-/// A service name no other test (or concurrent run) uses.
-fn unique_service(test: &str) -> String {
-    format!("dear-test/{}/view-{test}/frames", std::process::id())
-}
-
-/// `deard` replaying the bundled sample in a loop at its recorded pace (classical engine);
-/// killed on drop.
-struct Daemon(Child);
-
-impl Daemon {
-    fn start(service: &str, log: &Path) -> Daemon {
-        let child = Command::new(deard())
-            .args(["--service", service, "--refine", "classical", "--loop"])
-            .arg("--replay")
-            .arg(root().join("samples/demo"))
-            .env("RUST_LOG", "info")
-            .stdout(Stdio::null())
-            .stderr(File::create(log).unwrap())
-            .spawn()
-            .expect("spawn deard");
-        Daemon(child)
-    }
-}
-
-impl Drop for Daemon {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
+/// `deard` replaying the bundled sample in a loop at its recorded pace (classical engine), its
+/// log in `log`.
+fn start_daemon(service: &str, log: &Path) -> Daemon {
+    let mut command = Command::new(binary("deard"));
+    command
+        .args(["--service", service, "--refine", "classical", "--loop"])
+        .arg("--replay")
+        .arg(demo_capture());
+    Daemon::spawn(command, log)
 }
 
 /// One HTTP answer.
@@ -159,7 +125,7 @@ fn decoded_size(answer: &Answer) -> (u32, u32) {
 fn serves_a_live_deard_stream_and_refuses_what_it_does_not_serve() {
     let tmp = tempfile::tempdir().unwrap();
     let service = unique_service("live");
-    let _daemon = Daemon::start(&service, &tmp.path().join("deard.log"));
+    let _daemon = start_daemon(&service, &tmp.path().join("deard.log"));
     let viewer = Viewer::start(ViewConfig::new("127.0.0.1:0", &service)).unwrap();
     let addr = viewer.local_addr();
 

@@ -3,16 +3,15 @@
 use std::path::Path;
 use std::process::{Command, Output};
 
+use dear_test_support::process::unique_service;
+
 /// Runs `deard --config CONFIG ARGS…` to its end on a service of its own
 /// (`dear-test/<pid>/<tag>/frames`).
 pub fn run_deard(config: &Path, args: &[&str], tag: &str) -> Output {
     Command::new(env!("CARGO_BIN_EXE_deard"))
         .args(["--config", config.to_str().unwrap()])
         .args(args)
-        .args([
-            "--service",
-            &format!("dear-test/{}/{tag}/frames", std::process::id()),
-        ])
+        .args(["--service", &unique_service(tag)])
         .output()
         .expect("run deard")
 }

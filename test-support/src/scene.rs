@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use dear_capture::{
-    Calibration, CaptureDir, CaptureManifest, CaptureWriter, Intrinsics, RgbdFrame,
+    Calibration, CaptureDir, CaptureManifest, CaptureWriter, GroundTruth, Intrinsics, RgbdFrame,
 };
 use ndarray::{Array2, Array3};
 
@@ -29,11 +29,7 @@ pub fn write_capture(
     height: u32,
     calibration: Calibration,
 ) -> CaptureDir {
-    let mut manifest =
-        CaptureManifest::new(width, height, Intrinsics::from_hfov(width, height, 70.0));
-    manifest.initial_calibration = calibration;
-    manifest.source = serde_json::Value::String(format!("analytic test scene, {frames} frames"));
-    let mut writer = CaptureWriter::create(dir, manifest).expect("create test capture");
+    let mut writer = writer(dir, frames, width, height, calibration);
     for i in 0..frames {
         writer
             .write_frame(&frame(i, width as usize, height as usize))
@@ -41,6 +37,47 @@ pub fn write_capture(
     }
     writer.finish().expect("finish test capture");
     CaptureDir::open(dir).expect("open test capture")
+}
+
+/// An aligned capture of the scene with its ground truth, as `dear-synth generate` writes one:
+/// a zero factory calibration, and each frame carrying the noise-free depth ([`true_depth`])
+/// and a zero perturbation.
+pub fn write_capture_with_ground_truth(
+    dir: &Path,
+    frames: u64,
+    width: u32,
+    height: u32,
+) -> CaptureDir {
+    let (w, h) = (width as usize, height as usize);
+    let mut writer = writer(dir, frames, width, height, Calibration::default());
+    for i in 0..frames {
+        let known = GroundTruth {
+            depth: Some(Array2::from_shape_fn((h, w), |(r, c)| {
+                true_depth(i, w, h, r, c)
+            })),
+            perturbation: Some(Calibration::default()),
+            ..GroundTruth::default()
+        };
+        writer
+            .write_sample(&frame(i, w, h), &known)
+            .expect("write test frame");
+    }
+    writer.finish().expect("finish test capture");
+    CaptureDir::open(dir).expect("open test capture")
+}
+
+fn writer(
+    dir: &Path,
+    frames: u64,
+    width: u32,
+    height: u32,
+    calibration: Calibration,
+) -> CaptureWriter {
+    let mut manifest =
+        CaptureManifest::new(width, height, Intrinsics::from_hfov(width, height, 70.0));
+    manifest.initial_calibration = calibration;
+    manifest.source = serde_json::Value::String(format!("analytic test scene, {frames} frames"));
+    CaptureWriter::create(dir, manifest).expect("create test capture")
 }
 
 /// The noise-free depth of frame `i` at pixel `(r, c)`: the ground truth of [`frame`].
