@@ -564,6 +564,9 @@ def main() -> None:
     large = {s: load(args.eval, f"sigma{s}") for s in LARGE_SIGMAS}
     frames = aligned["__file__"]["frames_evaluated"]
     sequence = load(args.eval, "sequence")
+    # Frames from a network frame to the delivery of its measurement (eval.json of dear eval
+    # --online; 0: measured on the frame itself).
+    delay = sequence["__file__"].get("online_delay_frames", 0)
     untracked_path = args.eval / "sequence-untracked" / "eval.json"
     untracked = load(args.eval, "sequence-untracked") if untracked_path.is_file() else None
 
@@ -676,7 +679,12 @@ def main() -> None:
             "AEPE is the error of the flow each frame was aligned with; the per-frame error "
             "over time is in `out/results/sequence/tracking.csv`; flicker is the mean "
             "frame-to-frame change of the published depth on static surfaces (pixels whose "
-            "ground truth did not change). ms / frame includes the "
+            "ground truth did not change). The online filter is deard's per-frame engine "
+            "(`dear_pipeline::engine`) with its background measurement made deterministic: each "
+            f"network measurement reaches the estimator {delay} frames after the frame that "
+            "asked for it (deard's typical latency at this size and 30 fps; "
+            '`--online-delay-frames`), so "flow network on" counts the frames measured off '
+            "the frame path and ms / frame is the frame path's. ms / frame includes the "
             "alignment check (the online trigger's residual), which runs beside the refinement "
             "on the second core."
         ),

@@ -277,7 +277,8 @@ pub struct PipelineConfig {
     /// With `calibration = "online"`: where the rough-flow network runs. `"background"` (the
     /// default): on a worker thread of lower priority, so no frame waits for it (its
     /// calibration applies from the first frame after it is ready); `"inline"`: on the frame
-    /// that asked for it, which then takes the network's time (deterministic, as `dear eval`).
+    /// that asked for it, which then takes the network's time (deterministic; `dear eval
+    /// --online` runs the background schedule made deterministic, `dear_pipeline::engine`).
     pub online_network: NetworkPlacement,
     /// Static calibration for `classical`/`none`, and the DEAR engine's fallback before its
     /// first estimate; none = the capture's `initial_calibration`. Finite, `|t| ≤`

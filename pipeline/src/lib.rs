@@ -13,6 +13,9 @@
 //! - [`filter`]: the classical edge-aware refinement baseline;
 //! - [`model`]: model bundles (ONNX graphs + manifest) run by tract (feature `inference`);
 //! - [`dear`]: the paper's per-frame chain of networks and geometry (feature `inference`);
+//! - [`engine`]: the per-frame engine deard runs with a bundle (chain, online estimator,
+//!   measurement off the frame path, output guard) and `dear eval --online` evaluates
+//!   (feature `inference`);
 //! - [`online`]: online re-estimation of the drifting calibration;
 //! - [`simd`]: the instruction sets the hot loops are compiled for, and which one runs.
 
@@ -21,6 +24,8 @@ pub mod align;
 pub mod dear;
 pub mod direct;
 pub mod edges;
+#[cfg(feature = "inference")]
+pub mod engine;
 #[cfg(feature = "evaluate")]
 pub mod evaluate;
 pub mod filter;

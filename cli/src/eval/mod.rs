@@ -8,24 +8,30 @@
 //! the paper's quantile split, coverage and time per frame.
 //!
 //! With `--online` (for sequences, `dear-synth sequence`), each bundle also runs in the
-//! daemon's online-recalibration mode over the frames in order ("NAME online"), and
-//! `tracking.csv` records every frame's flow error for the static calibration, per-frame
-//! estimation and the online filter: the tracking comparison of a drifting calibration.
+//! daemon's online-recalibration mode over the frames in order ("NAME online"): the library's
+//! per-frame engine that deard runs (`dear_pipeline::engine`), its background measurement
+//! replaced by the same measurement delivered exactly `--online-delay-frames` frames after the
+//! frame that asked for it (by default the daemon's typical latency at the capture's frame
+//! rate), so the rows are reproducible. `tracking.csv` records every frame's flow error for the
+//! static calibration, per-frame estimation and the online filter: the tracking comparison of
+//! a drifting calibration.
 
 mod figures;
 
 use std::fs;
+use std::num::NonZeroU32;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use dear_capture::{CaptureDir, Sample};
+use dear_pipeline::engine::{typical_delay_frames, MeasurementSchedule};
 use dear_pipeline::evaluate::{
     ground_truth_flow, ground_truth_mask, BundleMethod, Evaluation, Method, MethodOutput,
-    MethodReport, MethodRunner,
+    MethodReport, MethodRunner, OnlineBundleMethod,
 };
 use dear_pipeline::metrics::aepe;
 use dear_pipeline::model::ModelBundle;
-use dear_pipeline::online::{HealthReport, OnlineCalibrator, OnlineConfig};
+use dear_pipeline::online::{HealthReport, OnlineConfig};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
@@ -63,6 +69,12 @@ pub struct EvalArgs {
     /// between network runs (the daemon's `online_track_gain`; 0 turns tracking off).
     #[arg(long, default_value_t = OnlineConfig::default().track_gain)]
     pub online_track_gain: f32,
+    /// Online mode: frames from a network frame to the delivery of its measurement, standing
+    /// in for deard's background worker (default: its typical latency at the capture's frame
+    /// rate and size, `dear_pipeline::engine::typical_delay_frames`); 0 measures on the frame
+    /// itself, as deard's `online_network = "inline"`.
+    #[arg(long)]
+    pub online_delay_frames: Option<u32>,
 }
 
 /// What `eval.json` holds.
@@ -77,6 +89,10 @@ struct EvalFile {
     methods: Vec<MethodReport>,
     /// `--online`: per bundle, on how many frames the online mode ran the rough-flow network.
     online_network_frames: Vec<(String, usize)>,
+    /// `--online`: frames from a network frame to the delivery of its measurement (0: on the
+    /// frame itself).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    online_delay_frames: Option<u32>,
 }
 
 /// Positions `0..len` thinned to at most `limit`, evenly spaced, first included.
@@ -85,6 +101,15 @@ fn select(len: usize, limit: Option<usize>) -> Vec<usize> {
         Some(n) if n < len => (0..n).map(|i| i * len / n.max(1)).collect(),
         _ => (0..len).collect(),
     }
+}
+
+/// The capture's frame rate from its timestamps (`None` with fewer than two frames, or when
+/// they span no time).
+fn capture_fps(capture: &CaptureDir) -> Option<f64> {
+    let frames = &capture.manifest().frames;
+    let (first, last) = (frames.first()?, frames.last()?);
+    let span_s = last.timestamp_ns.checked_sub(first.timestamp_ns)? as f64 * 1e-9;
+    (frames.len() > 1 && span_s > 0.0).then(|| (frames.len() - 1) as f64 / span_s)
 }
 
 /// A bundle's row names.
@@ -119,25 +144,46 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         classical.extend(Method::CLASSICAL.iter().filter(|m| **m != Method::RawTof));
     }
     let mut runner = MethodRunner::new(h, w, initial);
-    let mut bundles = Vec::new();
-    for path in &args.bundles {
-        let bundle = ModelBundle::load(path)
-            .with_context(|| format!("cannot load model bundle {}", path.display()))?;
-        bundles.push(
-            BundleMethod::new(&bundle, bundle_name(path), h, w)
-                .with_context(|| format!("cannot prepare bundle {} for {w}×{h}", path.display()))?,
-        );
-    }
     let online_config = OnlineConfig {
         interval_frames: args.online_interval,
         track_gain: args.online_track_gain,
         ..OnlineConfig::default()
     };
-    // The capture's static calibration is the prior, as the daemon's (issue 32).
-    let mut online: Vec<(OnlineCalibrator, usize)> = bundles
-        .iter()
-        .map(|_| (OnlineCalibrator::with_prior(online_config, initial), 0))
-        .collect();
+    let online_delay = args.online.then(|| {
+        args.online_delay_frames.unwrap_or_else(|| {
+            let fps = capture_fps(&capture).unwrap_or_else(|| {
+                eprintln!(
+                    "dear eval: the capture's timestamps give no frame rate; the online \
+                     measurement's delay assumes 30 fps (set --online-delay-frames)"
+                );
+                30.0
+            });
+            typical_delay_frames(w, h, fps).get()
+        })
+    });
+    let schedule = match online_delay.and_then(NonZeroU32::new) {
+        Some(frames) => MeasurementSchedule::Delayed(frames),
+        None => MeasurementSchedule::Inline,
+    };
+    let mut bundles = Vec::new();
+    // Per bundle with `--online`: the daemon's engine, and on how many frames it measured.
+    let mut online: Vec<Option<(OnlineBundleMethod, usize)>> = Vec::new();
+    for path in &args.bundles {
+        let bundle = ModelBundle::load(path)
+            .with_context(|| format!("cannot load model bundle {}", path.display()))?;
+        let name = bundle_name(path);
+        let prepare = || format!("cannot prepare bundle {} for {w}×{h}", path.display());
+        bundles.push(BundleMethod::new(&bundle, &name, h, w).with_context(prepare)?);
+        online.push(if args.online {
+            // The capture's static calibration is the prior, as the daemon's (issue 32).
+            let method =
+                OnlineBundleMethod::new(&bundle, &name, (h, w), initial, online_config, schedule)
+                    .with_context(prepare)?;
+            Some((method, 0))
+        } else {
+            None
+        });
+    }
     let mut tracking = String::from(
         "frame,method,aepe_px,flow_network,health,constrained,correction_px,uncertainty_px,\
          held_back,disagreement,shift_px,shift_ncc,shift_at_limit\n",
@@ -216,7 +262,7 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
                 }
             }
         }
-        for (b, (calibrator, network_frames)) in bundles.iter_mut().zip(&mut online) {
+        for (b, online) in bundles.iter_mut().zip(&mut online) {
             let name = b.name().to_string();
             match b.run(frame) {
                 Ok(o) => {
@@ -244,15 +290,15 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
                     Err(e) => skipped.push(format!("frame {id}: bundle {name} refine-only: {e}")),
                 }
             }
-            if args.online {
-                match b.run_online(frame, calibrator) {
+            if let Some((method, network_frames)) = online {
+                match method.run(frame) {
                     Ok((out, report)) => {
-                        *network_frames += usize::from(report.ran_flow_network);
+                        *network_frames += usize::from(report.measured);
                         add(
                             &format!("{name} online"),
                             &out,
-                            Some(report.ran_flow_network),
-                            Some(calibrator.health()),
+                            Some(report.measured),
+                            method.engine().online().map(|o| o.health()),
                         );
                     }
                     Err(e) => skipped.push(format!("frame {id}: bundle {name} online: {e}")),
@@ -277,15 +323,12 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
         figures_method,
         figures: figure_files,
         methods: reports,
-        online_network_frames: if args.online {
-            bundles
-                .iter()
-                .zip(&online)
-                .map(|(b, (_, n))| (b.name().to_string(), *n))
-                .collect()
-        } else {
-            Vec::new()
-        },
+        online_network_frames: online
+            .iter()
+            .flatten()
+            .map(|(m, n)| (m.name().to_string(), *n))
+            .collect(),
+        online_delay_frames: online_delay,
     };
     let markdown = markdown(&file, &eval);
     fs::create_dir_all(&args.out)?;
@@ -358,10 +401,20 @@ fn markdown(file: &EvalFile, eval: &Evaluation) -> String {
     );
     md.push_str(&eval.markdown());
     for (name, n) in &file.online_network_frames {
+        let frames = file.frames_evaluated;
+        let how = match file.online_delay_frames {
+            Some(0) | None => format!(
+                "ran on {n} of {frames} frames; the others were aligned with the filtered estimate"
+            ),
+            Some(d) => format!(
+                "measured {n} of {frames} frames off the frame path, each measurement delivered \
+                 {d} frames later (as deard's background worker); every frame was aligned with \
+                 the filtered estimate"
+            ),
+        };
         md.push_str(&format!(
-            "\n{name} online: the rough-flow network ran on {n} of {} frames; the others were \
-             aligned with the filtered estimate (tracking.csv has every frame's flow error).\n",
-            file.frames_evaluated
+            "\n{name} online: the rough-flow network {how} (tracking.csv has every frame's \
+             flow error).\n"
         ));
     }
     if let Some(method) = &file.figures_method {

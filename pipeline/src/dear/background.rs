@@ -21,7 +21,14 @@
 //!
 //! One measurement is in flight at a time: while the worker is busy a new request is answered
 //! [`Submit::Busy`] and the caller simply asks again on a later frame.
+//!
+//! When the worker's result arrives depends on the machine and its load, so a run over a
+//! recorded sequence would differ from run to run. [`DelayedCalibrator`] is its deterministic
+//! stand-in for evaluation (`dear eval --online`, through [`crate::engine`]): the same
+//! measurement of the same frame, made at once on the caller's thread, handed out exactly `n`
+//! frames after the frame that asked for it.
 
+use std::num::NonZeroU32;
 use std::sync::mpsc::{self, Receiver, SyncSender, TryRecvError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -234,6 +241,73 @@ impl<T: Send + 'static> Drop for BackgroundCalibrator<T> {
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
+    }
+}
+
+/// The worker's deterministic stand-in (see the module docs): [`try_submit`](Self::try_submit)
+/// measures the frame at once on the caller's thread, and the `delay_frames`-th
+/// [`poll`](Self::poll) after it (one poll per frame, at the frame's start, as the engine polls
+/// the worker) hands the result out — what the worker does on a stream where its measurement
+/// takes `delay_frames` frame intervals. Busy until then, like the worker.
+#[derive(Debug)]
+pub struct DelayedCalibrator<T> {
+    chain: DearChain,
+    delay_frames: NonZeroU32,
+    /// The measurement made and the polls still to pass before it is handed out.
+    pending: Option<(u32, Delivered<T>)>,
+}
+
+impl<T> DelayedCalibrator<T> {
+    /// Measures with `chain` (built by the caller, as for the worker), each result handed out
+    /// by the `delay_frames`-th poll after its submission.
+    pub fn new(chain: DearChain, delay_frames: NonZeroU32) -> Self {
+        DelayedCalibrator {
+            chain,
+            delay_frames,
+            pending: None,
+        }
+    }
+
+    /// Measures the frame now, unless a measurement is still waiting to be handed out
+    /// ([`Submit::Busy`]).
+    ///
+    /// # Errors
+    /// [`ChainError::Shape`] when a plane does not have the chain's shape (nothing measured).
+    pub fn try_submit(&mut self, input: ChainInput<'_>, ticket: T) -> Result<Submit, ChainError> {
+        if self.pending.is_some() {
+            return Ok(Submit::Busy);
+        }
+        input.check_shape(self.chain.dim())?;
+        let start = Instant::now();
+        let report = self.chain.measure(input);
+        let delivered = Delivered {
+            ticket,
+            report,
+            elapsed: start.elapsed(),
+        };
+        self.pending = Some((self.delay_frames.get(), delivered));
+        Ok(Submit::Started)
+    }
+
+    /// A frame begins: the measurement, when this is the `delay_frames`-th poll since it was
+    /// submitted.
+    pub fn poll(&mut self) -> Option<Delivered<T>> {
+        let (polls_left, _) = self.pending.as_mut()?;
+        *polls_left -= 1;
+        if *polls_left > 0 {
+            return None;
+        }
+        self.pending.take().map(|(_, delivered)| delivered)
+    }
+
+    /// Whether a measurement is waiting to be handed out.
+    pub fn is_busy(&self) -> bool {
+        self.pending.is_some()
+    }
+
+    /// Frames from a submission to its delivery.
+    pub fn delay_frames(&self) -> NonZeroU32 {
+        self.delay_frames
     }
 }
 

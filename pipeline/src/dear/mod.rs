@@ -6,7 +6,8 @@
 //! - [`chain`]: [`DearChain`], `Full` (the paper) and `Cached(calibration)` modes, a frame in
 //!   two halves that consecutive frames can overlap;
 //! - [`background`]: [`BackgroundCalibrator`], a `Full` frame's calibration measurement on a
-//!   worker thread, so network frames do not stall the frame path;
+//!   worker thread, so network frames do not stall the frame path, and [`DelayedCalibrator`],
+//!   its deterministic stand-in for evaluation;
 //! - [`confidence`]: the published per-pixel confidence and its definition;
 //! - [`output_guard`]: [`OutputGuard`], the refinement network's output checked against
 //!   physics; a frame it rejects is refined classically instead.
@@ -17,7 +18,7 @@ pub mod confidence;
 pub mod output_guard;
 pub mod preprocess;
 
-pub use background::{BackgroundCalibrator, Delivered, Submit};
+pub use background::{BackgroundCalibrator, DelayedCalibrator, Delivered, Submit};
 pub use chain::{
     CachedFusion, ChainError, ChainInput, ChainMode, ChainOptions, ChainOutput, ChainReport,
     DearChain, MeasureReport, Prepared, StageTimings,

@@ -6,16 +6,22 @@
 //! refinement are measured separately without running the networks twice. A third row runs the
 //! refinement alone on depth aligned with the frame's *true* calibration: the protocol of the
 //! paper's Tables 2 and 3, which evaluate refinement on already-aligned input. A fourth,
-//! [`BundleMethod::run_online`], is the daemon's online recalibration over frames in order.
+//! [`OnlineBundleMethod`], is the daemon's online recalibration over frames in order: the
+//! library's per-frame engine that deard runs ([`FrameEngine`]), with the measurement of
+//! network frames delivered a fixed number of frames later instead of by a worker thread, so
+//! that the rows are reproducible.
 
 use ndarray::Array2;
 
 use super::methods::MethodOutput;
 use crate::capture::Sample;
 use crate::dear::{ChainError, ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
+use crate::engine::{
+    CalibrationPolicy, EngineConfig, EngineError, FrameEngine, FrameReport, MeasurementSchedule,
+};
 use crate::model::{BundleError, ModelBundle};
-use crate::online::OnlineCalibrator;
-use crate::RgbdFrame;
+use crate::online::OnlineConfig;
+use crate::{Calibration, RgbdFrame};
 
 /// The outputs of one chain run.
 #[derive(Debug, Clone)]
@@ -137,30 +143,95 @@ impl BundleMethod {
                 }),
         )
     }
+}
 
-    /// The daemon's online mode on the next frame of a sequence: `online` decides whether the
-    /// rough-flow network runs (`Full`) or its filtered estimate aligns the frame (`Cached`),
-    /// exactly as `deard` does. Frames must come in capture order. The output's flow is the
-    /// one the frame was aligned with; its calibration the published estimate. The time
-    /// includes the alignment residual, which the online trigger needs.
+/// A bundle in the daemon's online mode over the frames of a sequence (see the module docs).
+#[derive(Debug)]
+pub struct OnlineBundleMethod {
+    engine: FrameEngine,
+    depth: Array2<f32>,
+    confidence: Array2<u8>,
+}
+
+impl OnlineBundleMethod {
+    /// The engine deard runs with `bundle` in online mode for `(height, width)` frames, the
+    /// estimator set up by `config` and starting from `static_calibration`, the measurement of
+    /// network frames delivered as `schedule` says (`Delayed` for reproducible rows, `Inline`
+    /// for deard's `online_network = "inline"`; `Background` would make the rows depend on
+    /// the machine's speed). `name` labels its rows.
     ///
     /// # Errors
-    /// As [`DearChain::process`].
-    pub fn run_online(
-        &mut self,
-        frame: &RgbdFrame,
-        online: &mut OnlineCalibrator,
-    ) -> Result<(MethodOutput, ChainReport), ChainError> {
-        let mode = online.begin_frame().chain_mode();
-        let report = self.process(frame, mode)?;
-        online.end_frame(report.measurement.clone(), report.alignment);
+    /// As [`FrameEngine::new`].
+    pub fn new(
+        bundle: &ModelBundle,
+        name: impl Into<String>,
+        (height, width): (usize, usize),
+        static_calibration: Calibration,
+        config: OnlineConfig,
+        schedule: MeasurementSchedule,
+    ) -> Result<Self, EngineError> {
+        let engine = FrameEngine::new(
+            bundle,
+            width,
+            height,
+            static_calibration,
+            EngineConfig {
+                calibration: CalibrationPolicy::Online { config, schedule },
+                label: name.into(),
+            },
+        )?;
+        Ok(OnlineBundleMethod {
+            engine,
+            depth: Array2::zeros((height, width)),
+            confidence: Array2::zeros((height, width)),
+        })
+    }
+
+    /// The label of this bundle's rows.
+    pub fn name(&self) -> &str {
+        self.engine.label()
+    }
+
+    /// The engine (its online estimator's health, for the tracking table).
+    pub fn engine(&self) -> &FrameEngine {
+        &self.engine
+    }
+
+    /// The next frame of the sequence (frames must come in capture order), as deard processes
+    /// it when it keeps up with the camera: prepared with the estimate as it is, then finished.
+    /// The output's flow is the one the frame was aligned with, its calibration the published
+    /// one, its time the frame path's (an off-path measurement is not in it; an inline one is).
+    ///
+    /// # Errors
+    /// As [`FrameEngine::process`].
+    pub fn run(&mut self, frame: &RgbdFrame) -> Result<(MethodOutput, FrameReport), ChainError> {
+        let input = ChainInput {
+            rgb: frame.rgb.view(),
+            amplitude: frame.amplitude.view(),
+            depth: frame.depth.view(),
+        };
+        let output = ChainOutput {
+            depth: self.depth.view_mut(),
+            confidence: self.confidence.view_mut(),
+        };
+        let report = match self.engine.prepare(input)? {
+            Some(prepared) => {
+                self.engine
+                    .finish(frame.index, prepared, input, output, None)
+                    .0?
+            }
+            None => self.engine.process(frame.index, input, output)?,
+        };
         let output = MethodOutput {
             depth: self.depth.clone(),
-            flow: Some(self.chain.flow_refined().clone()),
+            flow: Some(self.engine.chain().flow_refined().clone()),
             flow_rough: None,
-            calibration: online.estimate().or(report.calibration),
-            seconds: report.timings.total().as_secs_f64(),
-            expected_error_code: self.expected_error_code(&report),
+            calibration: Some(report.calibration),
+            seconds: report.chain.timings.total().as_secs_f64(),
+            expected_error_code: report
+                .chain
+                .confidence_is_expected_error
+                .then(|| self.confidence.clone()),
         };
         Ok((output, report))
     }

@@ -10,7 +10,7 @@ pub mod methods;
 pub mod report;
 
 #[cfg(feature = "inference")]
-pub use bundle::{BundleMethod, BundleOutputs};
+pub use bundle::{BundleMethod, BundleOutputs, OnlineBundleMethod};
 pub use methods::{Method, MethodOutput, MethodRunner};
 pub use report::{Evaluation, MethodReport};
 
