@@ -124,3 +124,78 @@ fn deard_bench_names_a_missing_capture() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("/nonexistent/capture"), "{err}");
 }
+
+/// The CPUs this test process may run on (its affinity), from `/proc/self/status`.
+fn allowed_cpus() -> Vec<usize> {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap();
+    let list = status
+        .lines()
+        .find_map(|l| l.strip_prefix("Cpus_allowed_list:"))
+        .unwrap()
+        .trim();
+    list.split(',')
+        .flat_map(|part| match part.split_once('-') {
+            Some((a, b)) => (a.parse().unwrap()..=b.parse().unwrap()).collect::<Vec<usize>>(),
+            None => vec![part.parse().unwrap()],
+        })
+        .collect()
+}
+
+#[test]
+fn deard_bench_pinned_to_one_core_runs_every_thread_there_and_ends_its_hog() {
+    let cpus = allowed_cpus();
+    let pin = cpus[0].to_string();
+    let mut args = vec!["--frames", "3", "--warmup", "1", "--mode", "online"];
+    args.extend(["--pin-cpu", &pin]);
+    // A busy board where there is a second CPU to keep busy.
+    let hog = cpus.get(1).map(|c| c.to_string());
+    if let Some(hog) = &hog {
+        args.extend(["--hog-cpu", hog]);
+    }
+    let (stdout, report) = bench(&args);
+    assert_eq!(
+        report["pinned_cpu"].as_u64(),
+        Some(cpus[0] as u64),
+        "{report}"
+    );
+    // The parallelism the bench saw is its affinity: the one core.
+    assert_eq!(report["threads_available"].as_u64(), Some(1), "{report}");
+    assert!(stdout.contains("1 rayon thread"), "{stdout}");
+    assert_eq!(report["modes"][0]["all"]["count"].as_u64(), Some(3));
+    if let Some(hog) = &hog {
+        assert_eq!(report["hog_cpus"][0].as_u64(), hog.parse().ok(), "{report}");
+        // The hog was started, and is gone (killed and reaped) once the bench has exited.
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with("busy board:"))
+            .unwrap_or_else(|| panic!("{stdout}"));
+        let pid = line.rsplit("pid ").next().unwrap().trim_end_matches(')');
+        let pid: u32 = pid.parse().unwrap_or_else(|e| panic!("{line}: {e}"));
+        let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+        assert!(
+            !String::from_utf8_lossy(&cmdline).contains("--spin-cpu"),
+            "the hog {pid} outlived the bench"
+        );
+    }
+}
+
+#[test]
+fn deard_bench_refuses_a_cpu_it_cannot_use_by_number() {
+    for (args, expected) in [
+        (vec!["--pin-cpu", "100000"], "CPU 100000"),
+        (
+            vec!["--pin-cpu", "0", "--hog-cpu", "0"],
+            "--hog-cpu names the CPU",
+        ),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_deard-bench"))
+            .current_dir(root())
+            .args(["--capture", "samples/demo", "--frames", "1"])
+            .args(&args)
+            .output()
+            .expect("run deard-bench");
+        assert!(!out.status.success(), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(expected), "{args:?}: {err}");
+    }
+}

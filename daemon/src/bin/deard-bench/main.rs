@@ -14,11 +14,18 @@
 //! background): back to back, every frame overlaps, so the time per frame is the throughput
 //! interval and the latency is longer than it. `--sequential` processes each frame whole.
 //!
+//! `--pin-cpu 0` runs the whole bench on one core (one rayon thread; the background worker
+//! at nice +19 on the same core), and `--hog-cpu 1` keeps another core busy with a spinning
+//! process for the whole measurement: a board whose other cores belong to the apps
+//! (`cores`).
+//!
 //! ```sh
 //! target/release/dear-synth sequence --frames 60 --width 640 --height 480 --seed 5 --out /tmp/vga
 //! target/release/deard-bench --capture /tmp/vga --bundle models/edge
+//! target/release/deard-bench --capture /tmp/vga --mode online --pin-cpu 0 --hog-cpu 1
 //! ```
 
+mod cores;
 mod machine;
 
 use std::path::PathBuf;
@@ -77,6 +84,14 @@ struct Cli {
     /// Process each frame whole, never overlapping two (`Processor::process_into`).
     #[arg(long)]
     sequential: bool,
+    /// Run on this one CPU only (every thread, the background worker included; one rayon
+    /// thread): the one-core figures. As `taskset -c CPU` with `RAYON_NUM_THREADS=1`.
+    #[arg(long)]
+    pin_cpu: Option<usize>,
+    /// Keep this CPU busy with a spinning process while measuring (repeatable): the figures of
+    /// a board whose other cores run the apps.
+    #[arg(long = "hog-cpu")]
+    hog_cpus: Vec<usize>,
 }
 
 /// Median, p95 and mean of a set of milliseconds.
@@ -138,11 +153,38 @@ struct Report {
     fps: f64,
     /// `--machine`: this machine's measured limits.
     machine: Option<machine::MachineLimits>,
+    /// `--pin-cpu`: the one CPU every thread ran on.
+    pinned_cpu: Option<usize>,
+    /// `--hog-cpu`: the CPUs kept busy by a spinning process.
+    hog_cpus: Vec<usize>,
     modes: Vec<ModeReport>,
 }
 
 fn main() -> ExitCode {
+    let mut args = std::env::args().skip(1);
+    if args.next().as_deref() == Some(cores::SPIN_FLAG) {
+        return match cores::spin(args.next()) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("deard-bench: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
     let cli = Cli::parse();
+    // Before any other thread exists, so that every later one inherits the CPU.
+    if let Some(cpu) = cli.pin_cpu {
+        let pinned = cores::pin_to(cpu).and_then(|()| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .build_global()
+                .map_err(|e| format!("cannot make the one-thread pool: {e}"))
+        });
+        if let Err(e) = pinned {
+            eprintln!("deard-bench: {e}");
+            return ExitCode::FAILURE;
+        }
+    }
     match run(&cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -171,6 +213,9 @@ fn run(cli: &Cli) -> Result<(), String> {
         return Err(format!("no readable frame in {}", cli.capture.display()));
     }
     let calibration = capture.manifest().initial_calibration;
+    if cli.pin_cpu.is_some_and(|cpu| cli.hog_cpus.contains(&cpu)) {
+        return Err("--hog-cpu names the CPU the bench is pinned to (--pin-cpu)".into());
+    }
     let modes = if cli.modes.is_empty() {
         vec![CalibrationMode::Online, CalibrationMode::EveryFrame]
     } else {
@@ -197,6 +242,16 @@ fn run(cli: &Cli) -> Result<(), String> {
         );
         m
     });
+    if let Some(cpu) = cli.pin_cpu {
+        println!(
+            "pinned to CPU {cpu}: every thread ({} rayon thread, the background worker at nice +19)",
+            rayon::current_num_threads()
+        );
+    }
+    let hogs = cores::Hogs::start(&cli.hog_cpus)?;
+    if !cli.hog_cpus.is_empty() {
+        println!("busy board: a spinning process on {}", hogs.describe());
+    }
     let mut reports = Vec::new();
     for mode in modes {
         let config = PipelineConfig {
@@ -224,6 +279,7 @@ fn run(cli: &Cli) -> Result<(), String> {
         print_report(&report);
         reports.push(report);
     }
+    drop(hogs);
     if let Some(path) = &cli.json {
         let report = Report {
             capture: cli.capture.clone(),
@@ -234,6 +290,8 @@ fn run(cli: &Cli) -> Result<(), String> {
             online_network: cli.online_network.name(),
             fps: cli.fps,
             machine: limits,
+            pinned_cpu: cli.pin_cpu,
+            hog_cpus: cli.hog_cpus.clone(),
             modes: reports,
         };
         let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
