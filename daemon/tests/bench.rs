@@ -65,6 +65,8 @@ fn deard_bench_reports_every_measured_frame() {
         assert_eq!(count("with_network") + count("without_network"), 5, "{m}");
         assert!(m["all"]["median_ms"].as_f64().unwrap() > 0.0);
         assert!(m["rss_end_mib"].as_f64().unwrap() > 1.0);
+        // Processing a frame takes CPU time, counted over every thread.
+        assert!(m["cpu_ms_per_frame"].as_f64().unwrap() > 0.0, "{m}");
         let stages = m["stage_median_ms"].as_array().unwrap();
         assert!(
             stages

@@ -138,6 +138,10 @@ struct ModeReport {
     stage_median_ms: Vec<(String, f64)>,
     rss_after_warmup_mib: Option<f64>,
     rss_end_mib: Option<f64>,
+    /// CPU time of the whole process (every thread: the frame path, the pool, the background
+    /// worker) over the measured frames, per frame: the work a frame costs, whatever else
+    /// the machine runs.
+    cpu_ms_per_frame: Option<f64>,
 }
 
 #[derive(Debug, Serialize)]
@@ -330,6 +334,7 @@ fn measure(
     let (mut with, mut without, mut latency) = (Vec::new(), Vec::new(), Vec::new());
     let mut stage_ms: Vec<Vec<f64>> = vec![Vec::new(); stages.len()];
     let mut rss_after_warmup = None;
+    let mut cpu_at_warmup = None;
     let mut overlapped_frames = 0;
     let total = schedule.warmup + schedule.measured;
     let clock = Instant::now();
@@ -350,6 +355,7 @@ fn measure(
     for i in 0..total {
         if i == schedule.warmup {
             rss_after_warmup = resident_mib();
+            cpu_at_warmup = process_cpu_s();
         }
         // This frame: prepared (`None` when processed whole), when its first half started, and
         // the processor's time on it so far.
@@ -429,6 +435,9 @@ fn measure(
             .collect(),
         rss_after_warmup_mib: rss_after_warmup,
         rss_end_mib: resident_mib(),
+        cpu_ms_per_frame: process_cpu_s()
+            .zip(cpu_at_warmup)
+            .map(|(end, start)| (end - start) * 1e3 / schedule.measured as f64),
     })
 }
 
@@ -455,6 +464,20 @@ fn print_report(r: &ModeReport) {
     if let (Some(a), Some(b)) = (r.rss_after_warmup_mib, r.rss_end_mib) {
         println!("  resident memory: {a:.1} MiB after warm-up, {b:.1} MiB at the end");
     }
+    if let Some(ms) = r.cpu_ms_per_frame {
+        println!("  CPU time per frame (every thread): {ms:.1} ms");
+    }
+}
+
+/// CPU time this process has used (user + system, every thread), seconds.
+fn process_cpu_s() -> Option<f64> {
+    // SAFETY: getrusage writes the zeroed struct it is given.
+    let usage = unsafe {
+        let mut usage: libc::rusage = std::mem::zeroed();
+        (libc::getrusage(libc::RUSAGE_SELF, &mut usage) == 0).then_some(usage)
+    }?;
+    let s = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    Some(s(usage.ru_utime) + s(usage.ru_stime))
 }
 
 /// This process's resident set (VmRSS), MiB; `None` where `/proc` does not say.
