@@ -159,6 +159,14 @@ impl OffPath {
         }
     }
 
+    /// The calibration in use, that the next submitted measurement must clearly beat.
+    fn set_reference(&mut self, reference: Calibration) {
+        match self {
+            OffPath::Worker(w) => w.set_reference(Some(reference)),
+            OffPath::Delayed(d) => d.set_reference(Some(reference)),
+        }
+    }
+
     /// A frame begins: the finished measurement, if one is due.
     fn poll(&mut self) -> Option<Delivered<NetworkTicket>> {
         match self {
@@ -283,7 +291,7 @@ impl FrameEngine {
         static_calibration: Calibration,
         config: EngineConfig,
     ) -> Result<Self, EngineError> {
-        let chain = DearChain::new(bundle, width, height)?;
+        let mut chain = DearChain::new(bundle, width, height)?;
         let (online, off_path) = match config.calibration {
             CalibrationPolicy::EveryFrame => (None, None),
             CalibrationPolicy::Online { config, schedule } => {
@@ -307,6 +315,10 @@ impl FrameEngine {
                 (Some(online), off_path)
             }
         };
+        // Every frame measured (no estimator): the factory calibration is the one in use.
+        if online.is_none() {
+            chain.set_reference(Some(static_calibration));
+        }
         Ok(FrameEngine {
             chain,
             online,
@@ -402,7 +414,8 @@ impl FrameEngine {
         };
         let delivered = deliver(off_path, online);
         let decision = online.begin_frame();
-        let measured = decision.run_network.is_some() && submit(off_path, online, input);
+        let measured = decision.run_network.is_some()
+            && submit(off_path, online, input, self.static_calibration);
         let aligned_with = prepared.calibration();
         let next_calibration = online.estimate().unwrap_or(self.static_calibration);
         let (finished, next_prepared) = match next {
@@ -444,11 +457,16 @@ impl FrameEngine {
         let mut measured = false;
         let mode = match (self.online.as_mut(), self.off_path.as_mut()) {
             (None, _) => ChainMode::Full,
-            (Some(online), None) => online.begin_frame().chain_mode(),
+            (Some(online), None) => {
+                // The measurement must clearly beat the estimate in use to move it.
+                let reference = online.estimate().unwrap_or(self.static_calibration);
+                self.chain.set_reference(Some(reference));
+                online.begin_frame().chain_mode()
+            }
             (Some(online), Some(off_path)) => {
                 let decision = online.begin_frame();
                 if decision.run_network.is_some() {
-                    measured = submit(off_path, online, input);
+                    measured = submit(off_path, online, input, self.static_calibration);
                 }
                 // Before the first estimate: the static calibration.
                 ChainMode::Cached(decision.calibration.unwrap_or(self.static_calibration))
@@ -538,11 +556,18 @@ impl FrameEngine {
 
 /// A frame on which the online estimator asks for the network, with the measurement off the
 /// frame path: hands the frame over (`true`), or tells the estimator the measurement is busy.
-fn submit(off_path: &mut OffPath, online: &mut OnlineCalibrator, input: ChainInput<'_>) -> bool {
+fn submit(
+    off_path: &mut OffPath,
+    online: &mut OnlineCalibrator,
+    input: ChainInput<'_>,
+    static_calibration: Calibration,
+) -> bool {
     if off_path.is_unavailable() {
         online.network_busy();
         return false;
     }
+    // The measurement must clearly beat the estimate in use to move it.
+    off_path.set_reference(online.estimate().unwrap_or(static_calibration));
     let ticket = online.defer_network();
     // A frame of the wrong shape fails the chain too.
     match off_path.try_submit(input, ticket) {

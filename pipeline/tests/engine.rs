@@ -13,6 +13,7 @@ use dear_pipeline::engine::{
     CalibrationPolicy, EngineConfig, FrameEngine, FrameReport, MeasurementSchedule,
 };
 use dear_pipeline::model::ModelBundle;
+use dear_pipeline::online::observability::Information;
 use dear_pipeline::online::OnlineConfig;
 use dear_pipeline::{Calibration, RgbdFrame};
 use ndarray::Array2;
@@ -115,9 +116,11 @@ fn a_delayed_measurement_of_frame_k_is_applied_at_frame_k_plus_n() {
     // No frame on the frame path runs the network.
     assert!(steps.iter().all(|s| !s.report.chain.ran_flow_network));
 
-    // What arrives at frame N is the measurement of frame 0's planes.
+    // What arrives at frame N is the measurement of frame 0's planes, judged against the
+    // calibration in use then (the static one: no estimate yet).
     let (h, w) = frames[0].dim();
     let mut chain = DearChain::new(&bundle, w, h).unwrap();
+    chain.set_reference(Some(start));
     let of_frame_0 = chain.measure(input(&frames[0])).unwrap().measurement;
     assert_eq!(steps[n].report.delivered.as_ref(), Some(&of_frame_0));
     assert!(of_frame_0.is_ok(), "the sample's first frame is measurable");
@@ -160,5 +163,35 @@ fn the_delayed_schedule_is_reproducible() {
             .count()
             >= 3,
         "the runs compared deliver measurements"
+    );
+}
+
+/// The chain's measurement judged against the calibration in use
+/// (`DearChain::set_reference`), on the sample's first frame: its true calibration is kept
+/// bit for bit, with zero information (the estimator leaves its estimate); a calibration 3 px
+/// off is replaced by one closer to the truth.
+#[test]
+fn the_chain_keeps_a_correct_calibration_in_use_and_replaces_a_wrong_one() {
+    let bundle = ModelBundle::load(root().join("models/edge")).unwrap();
+    let frame = &frames(1)[0];
+    let (h, w) = frame.dim();
+    let truth = CaptureDir::open(root().join("samples/demo"))
+        .unwrap()
+        .manifest()
+        .initial_calibration;
+    let mut chain = DearChain::new(&bundle, w, h).unwrap();
+
+    chain.set_reference(Some(truth));
+    let kept = chain.measure(input(frame)).unwrap().measurement.unwrap();
+    assert_eq!(kept.calibration, truth);
+    assert_eq!(kept.information, Some(Information::ZERO));
+
+    let wrong = misaligned_start();
+    chain.set_reference(Some(wrong));
+    let moved = chain.measure(input(frame)).unwrap().measurement.unwrap();
+    // The principal point decides the flow at every depth here: 3 px off before.
+    assert!(
+        (moved.calibration.cx - truth.cx).abs() < 1.0,
+        "{moved:?} vs truth {truth:?}"
     );
 }

@@ -173,7 +173,13 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
             .with_context(|| format!("cannot load model bundle {}", path.display()))?;
         let name = bundle_name(path);
         let prepare = || format!("cannot prepare bundle {} for {w}×{h}", path.display());
-        bundles.push(BundleMethod::new(&bundle, &name, h, w).with_context(prepare)?);
+        // The capture's static calibration is the one in use: the chain moves it only when
+        // the frame clearly shows it wrong, as deard does with its factory calibration.
+        bundles.push(
+            BundleMethod::new(&bundle, &name, h, w)
+                .with_context(prepare)?
+                .with_reference(Some(initial)),
+        );
         online.push(if args.online {
             // The capture's static calibration is the prior, as the daemon's (issue 32).
             let method =

@@ -35,6 +35,7 @@ use std::time::{Duration, Instant};
 
 use ndarray::{Array2, Array3};
 
+use crate::calibration::Calibration;
 use crate::dear::chain::{ChainError, ChainInput, DearChain, MeasureReport};
 
 /// The worker's nice value relative to the caller (Linux: nice is per thread); see the module
@@ -52,6 +53,8 @@ struct Planes {
 struct Job<T> {
     ticket: T,
     planes: Planes,
+    /// The calibration in use when the frame was submitted ([`DearChain::set_reference`]).
+    reference: Option<Calibration>,
 }
 
 struct Done<T> {
@@ -91,6 +94,8 @@ pub struct BackgroundCalibrator<T: Send + 'static> {
     /// The frame buffers when no job holds them.
     spare: Option<Planes>,
     busy: bool,
+    /// The calibration in use, sent with the next job.
+    reference: Option<Calibration>,
     stopped: bool,
     thread: Option<JoinHandle<()>>,
 }
@@ -118,8 +123,14 @@ impl<T: Send + 'static> BackgroundCalibrator<T> {
             .name(name.to_owned())
             .spawn(move || {
                 lower_priority();
-                while let Ok(Job { ticket, planes }) = job_rx.recv() {
+                while let Ok(Job {
+                    ticket,
+                    planes,
+                    reference,
+                }) = job_rx.recv()
+                {
                     let start = Instant::now();
+                    chain.set_reference(reference);
                     let report = chain.measure(ChainInput {
                         rgb: planes.rgb.view(),
                         amplitude: planes.amplitude.view(),
@@ -145,9 +156,16 @@ impl<T: Send + 'static> BackgroundCalibrator<T> {
                 depth: Array2::zeros((h, w)),
             }),
             busy: false,
+            reference: None,
             stopped: false,
             thread: Some(thread),
         })
+    }
+
+    /// The calibration in use that the next submitted frame's measurement must clearly beat
+    /// ([`DearChain::set_reference`]).
+    pub fn set_reference(&mut self, reference: Option<Calibration>) {
+        self.reference = reference;
     }
 
     /// Copies the frame and starts measuring it, unless a measurement is still running.
@@ -168,10 +186,14 @@ impl<T: Send + 'static> BackgroundCalibrator<T> {
         planes.rgb.assign(&input.rgb);
         planes.amplitude.assign(&input.amplitude);
         planes.depth.assign(&input.depth);
-        let sent = self
-            .jobs
-            .as_ref()
-            .is_some_and(|jobs| jobs.send(Job { ticket, planes }).is_ok());
+        let sent = self.jobs.as_ref().is_some_and(|jobs| {
+            jobs.send(Job {
+                ticket,
+                planes,
+                reference: self.reference,
+            })
+            .is_ok()
+        });
         if sent {
             self.busy = true;
             Ok(Submit::Started)
@@ -266,6 +288,12 @@ impl<T> DelayedCalibrator<T> {
             delay_frames,
             pending: None,
         }
+    }
+
+    /// The calibration in use that the next measurements must clearly beat
+    /// ([`DearChain::set_reference`]).
+    pub fn set_reference(&mut self, reference: Option<Calibration>) {
+        self.chain.set_reference(reference);
     }
 
     /// Measures the frame now, unless a measurement is still waiting to be handed out

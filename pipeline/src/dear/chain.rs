@@ -25,7 +25,7 @@ use crate::calibration::Calibration;
 use crate::dear::confidence::{confidence_into, expected_error_confidence_into};
 use crate::dear::output_guard::{OutputGuard, RefinementCheck};
 use crate::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
-use crate::direct::{estimate_calibration_direct, DirectFitParams};
+use crate::direct::{estimate_calibration_direct_against, DirectFitParams};
 use crate::filter::ClassicalRefiner;
 use crate::frame::Flow;
 use crate::geometry::{warp_depth, warp_depth_and_bilinear, LsqError, RobustOptions};
@@ -266,6 +266,9 @@ struct FrontEnd {
     classical: Option<ClassicalRefiner>,
     /// The refinement's inputs being written by `prepare`.
     staged: Staged,
+    /// The calibration in use that a `Full` frame's direct fit must clearly beat
+    /// ([`DearChain::set_reference`]).
+    reference: Option<Calibration>,
 }
 
 /// Where a frame's `W_convt` and final flow `W_refn` are.
@@ -386,6 +389,7 @@ impl DearChain {
                 flows: FlowSource::Buffers,
                 classical: uses_classical.then(ClassicalRefiner::default),
                 staged: Staged::new(height, width, uses_classical),
+                reference: None,
             },
             staged: Staged::new(height, width, uses_classical),
             edge_check: EdgeCheck::new(options.shift_search_px),
@@ -408,6 +412,16 @@ impl DearChain {
     /// Changes how `Cached` frames treat the fusion network.
     pub fn set_cached_fusion(&mut self, cached_fusion: CachedFusion) {
         self.options.cached_fusion = cached_fusion;
+    }
+
+    /// The calibration in use (the factory calibration, or the online estimate): a `Full`
+    /// frame's direct fit, started from the network's calibration, replaces it only when the
+    /// frame clearly shows it wrong ([`estimate_calibration_direct_against`]); otherwise the
+    /// frame is aligned by it and its measurement constrains nothing (zero information: the
+    /// online estimator leaves its estimate). `None` (the paper's protocol, and the default):
+    /// the network's calibration is the reference.
+    pub fn set_reference(&mut self, reference: Option<Calibration>) {
+        self.front.reference = reference;
     }
 
     /// The graphs, for running a single network (tests, benches).
@@ -776,16 +790,33 @@ impl FrontEnd {
             options.robust,
             options.inlier_threshold_px,
         );
-        // The direct fit to the frame's edges, started from the network's calibration.
+        // The direct fit to the frame's edges, started from the network's calibration and
+        // judged against the calibration in use.
         let direct = match (&options.direct_fit, &fit) {
             (Some(params), Ok(network)) => {
-                Some(Measurement::from_direct_fit(&estimate_calibration_direct(
+                // Without a calibration in use there is nothing to protect: the fit only has
+                // to beat the network's start (the paper's protocol).
+                let unguarded = DirectFitParams {
+                    min_gain: 0.0,
+                    max_mean_flow_change_px: f32::INFINITY,
+                    ..*params
+                };
+                let direct = estimate_calibration_direct_against(
                     input.rgb,
                     input.amplitude,
                     input.depth,
                     network.calibration,
-                    params,
-                )))
+                    self.reference.unwrap_or(network.calibration),
+                    if self.reference.is_some() {
+                        params
+                    } else {
+                        &unguarded
+                    },
+                );
+                Some(match self.reference {
+                    Some(_) if direct.fell_back => Some(Measurement::keeping_reference(&direct)),
+                    _ => Measurement::from_direct_fit(&direct),
+                })
             }
             _ => None,
         };

@@ -62,6 +62,14 @@ impl BundleMethod {
         })
     }
 
+    /// The calibration in use (the capture's static calibration) that the chain's direct fit
+    /// must clearly beat ([`DearChain::set_reference`]); without it the network's
+    /// calibration is the reference (the paper's protocol).
+    pub fn with_reference(mut self, reference: Option<Calibration>) -> Self {
+        self.chain.set_reference(reference);
+        self
+    }
+
     /// The label of this bundle's rows.
     pub fn name(&self) -> &str {
         &self.name

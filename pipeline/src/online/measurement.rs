@@ -133,6 +133,21 @@ impl Measurement {
         })
     }
 
+    /// A direct fit that did not beat the calibration in use
+    /// ([`crate::direct::estimate_calibration_direct_against`] fell back to its reference):
+    /// that calibration, constraining nothing (zero information), so that the online estimator
+    /// leaves its estimate where it is.
+    pub fn keeping_reference(fit: &DirectFit) -> Measurement {
+        Measurement {
+            calibration: fit.calibration,
+            information: Some(Information::ZERO),
+            evidence: Evidence::Edges {
+                correlation: fit.correlation,
+                initial_correlation: fit.initial_correlation,
+            },
+        }
+    }
+
     /// How well the calibration fits its evidence, in `[0, 1]`: for a flow fit
     /// `inlier_fraction / (1 + rms²)` (rms in px; 1 for a flow the model explains exactly, 0.5
     /// at 1 px RMS), for an edge fit the edge-map correlation (0 when negative).
