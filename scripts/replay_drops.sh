@@ -10,7 +10,8 @@
 #   target/release/dear-synth sequence --frames 300 --width 640 --height 480 --seed 5 --out /tmp/vga300
 #   scripts/replay_drops.sh /tmp/vga300 10        # 3,000 frames, 100 s
 #
-# Other settings (e.g. [capture] queue_depth) go in a config file: CONFIG=file.
+# Other settings (e.g. [capture] queue_depth) go in a config file: CONFIG=file; DEARD=path runs
+# another build of the daemon (a before/after comparison on the same machine and load).
 # Writes out/replay-drops-deard.log; the looped capture is made once in ${CAPTURE}-x${PASSES}.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -18,7 +19,8 @@ cd "$(dirname "$0")/.."
 capture=${1:?usage: scripts/replay_drops.sh CAPTURE [PASSES]}
 passes=${2:-10}
 looped="${capture%/}-x${passes}"
-[ -x target/release/deard ] || cargo build --release -p deard
+deard=${DEARD:-target/release/deard}
+[ -x "$deard" ] || cargo build --release -p deard
 mkdir -p out
 log=out/replay-drops-deard.log
 
@@ -51,11 +53,11 @@ fi
 config_flag=()
 [ -n "${CONFIG:-}" ] && config_flag=(--config "$CONFIG")
 start=$(date +%s.%N)
-target/release/deard "${config_flag[@]}" --replay "$looped" --pacing timestamps --exit-when-done \
+"$deard" "${config_flag[@]}" --replay "$looped" --pacing timestamps --exit-when-done \
     --camera "drops-$$" >"$log" 2>&1
 end=$(date +%s.%N)
 # The last line ("stopped") has the totals; strip the log's colour codes first.
 totals=$(sed 's/\x1b\[[0-9;]*m//g' "$log" | grep 'stopped' | tail -1 |
     grep -o '\(published\|skipped\|dropped\)=[0-9]*' | tr '\n' ' ')
-echo "replay_drops.sh: $looped in $(awk -v a="$start" -v b="$end" 'BEGIN { printf "%.0f", b - a }') s, load $(cut -d' ' -f1-3 /proc/loadavg): $totals"
+echo "replay_drops.sh: $deard, $looped in $(awk -v a="$start" -v b="$end" 'BEGIN { printf "%.0f", b - a }') s, load $(cut -d' ' -f1-3 /proc/loadavg): $totals"
 echo "daemon log: $log"
