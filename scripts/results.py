@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import shutil
 from pathlib import Path
 from typing import Any
@@ -43,6 +44,17 @@ def load(eval_dir: Path, name: str) -> dict[str, Report]:
     if outside.is_file():
         report[OUTSIDE] = json.loads(outside.read_text())
     return report
+
+
+def missing(eval_dir: Path, names: list[str]) -> str:
+    """The line a section gets in place of its table when its sets were not evaluated."""
+    files = ", ".join(f"`{eval_dir / n / 'eval.json'}`" for n in names)
+    return f"– (not evaluated: no {files})"
+
+
+def load_optional(eval_dir: Path, name: str) -> dict[str, Report] | None:
+    """`load`, or None when the set has no eval.json (its figures are then written as –)."""
+    return load(eval_dir, name) if (eval_dir / name / "eval.json").is_file() else None
 
 
 def fmt(v: float | None, digits: int = 2) -> str:
@@ -308,6 +320,26 @@ def table_families(eval_dir: Path) -> list[str]:
     return lines
 
 
+def table_families_aepe(eval_dir: Path) -> list[str]:
+    """Alignment on the same sets (aligned frames, a correct factory calibration): AEPE in px of
+    every alignment method, the chain's final flow for each bundle."""
+    sets = [n for n, _ in FAMILIES if (eval_dir / n / "eval.json").is_file()]
+    reports = {n: load(eval_dir, n) for n in sets}
+    names = bundles(reports[sets[0]]) if sets else []
+    columns = [
+        ("static calibration (factory)", "static-calibration"),
+        ("classical edge matching + LS", "edge-matching"),
+        ("direct fit", "direct-fit"),
+    ]
+    columns += [(f"`{b}` final flow", b) for b in names]
+    header = ["Set", *(label for label, _ in columns)]
+    lines = ["| " + " | ".join(header) + " |", "|---" + "|---:" * (len(header) - 1) + "|"]
+    for name in sets:
+        cells = [fmt(reports[name].get(m, {}).get("aepe_px")) for _, m in columns]
+        lines.append(f"| `{name}` | " + " | ".join(cells) + " |")
+    return lines
+
+
 def table_reliability(report: dict[str, Report]) -> list[str]:
     """Predicted against measured error of every row with an expected-error confidence."""
     lines: list[str] = []
@@ -544,6 +576,169 @@ def whole_paragraph(report: dict[str, Report]) -> str:
     )
 
 
+#: The README's headline table lies between these lines; `write_headline` replaces what is
+#: between them and nothing else.
+HEADLINE_BEGIN = "<!-- headline figures: written by scripts/results.py -->"
+HEADLINE_END = "<!-- end headline figures -->"
+#: The bundle the README's headline figures are of (the daemon's default).
+HEADLINE_BUNDLE = "edge"
+#: RESULTS.md sections the headline rows link to (GitHub's anchors of their headings).
+SECTION = {
+    "refinement": "refinement-on-aligned-input-mae-within-4-m-paper-tables-2-and-3",
+    "heldout": "held-out-family-sensors-and-scenes-no-training-run-sampled",
+    "whole": "whole-pipeline-on-misaligned-input-σ--4-px",
+    "online": "online-recalibration-on-a-drifting-calibration-beyond-the-paper",
+    "daemon": "the-daemons-time-per-frame",
+    "families": "refinement-on-every-family-does-it-leave-good-depth-alone-issue-33",
+}
+
+
+def field(report: dict[str, Report] | None, method: str, key: str) -> float | None:
+    """One figure of one row of a set's eval.json; None when the set or the row has none."""
+    return None if report is None else report.get(method, {}).get(key)
+
+
+def daemon_online(bench_path: Path) -> dict | None:
+    """The all-frames timing of a `deard-bench --json` file's online mode (its row "online,
+    all frames" in the daemon's table); None when the file or the mode is missing."""
+    if not bench_path.is_file():
+        return None
+    modes = json.loads(bench_path.read_text())["modes"]
+    return next((m["all"] for m in modes if m["mode"] == "online"), None)
+
+
+def headline_table(eval_dir: Path) -> list[str]:
+    """The README's headline figures: each one the figure RESULTS.md prints (the same rows of
+    the same eval.json files, formatted by `fmt` / `pct`), "–" where an input is missing."""
+    b = HEADLINE_BUNDLE
+    refine = f"{b} refine @ true calibration"
+    aligned = load_optional(eval_dir, "aligned")
+    heldout = load_optional(eval_dir, "heldout")
+    sigma4 = load_optional(eval_dir, "sigma4")
+    sequence = load_optional(eval_dir, "sequence")
+    clean = load_optional(eval_dir, "clean")
+
+    def mae(report: dict[str, Report] | None, method: str) -> str:
+        return fmt(field(report, method, "mae_all_cm"))
+
+    def ms(report: dict[str, Report] | None, method: str) -> str:
+        seconds = field(report, method, "median_seconds")
+        return fmt(None if seconds is None else 1e3 * seconds, 1)
+
+    raw4, out4 = field(sigma4, "raw-tof", "mae_all_cm"), field(sigma4, b, "mae_all_cm")
+    whole = (
+        f"AEPE {fmt(field(sigma4, 'static-calibration', 'aepe_px'))} → "
+        f"{fmt(field(sigma4, b, 'aepe_px'))} px; MAE {fmt(raw4)} → {fmt(out4)} cm "
+        f"({pct(out4, raw4)})"
+    )
+    sequence_frames = "–"
+    if sequence is None:
+        online = "– (no sequence evaluation)"
+    else:
+        sequence_frames = sequence["__file__"]["frames_evaluated"]
+        network = dict(sequence["__file__"].get("online_network_frames", []))
+        online = (
+            f"{fmt(field(sequence, f'{b} online', 'aepe_px'))} px, "
+            f"{mae(sequence, f'{b} online')} cm, {ms(sequence, f'{b} online')} ms a frame, "
+            f"network on {network.get(b, '?')} of {sequence_frames} frames (per-frame estimation: "
+            f"{fmt(field(sequence, b, 'aepe_px'))} px, {mae(sequence, b)} cm, "
+            f"{ms(sequence, b)} ms)"
+        )
+    vga = daemon_online(eval_dir / "deard-bench-vga.json")
+    qvga = daemon_online(eval_dir / "deard-bench-qvga.json")
+
+    def bench(timing: dict | None, key: str) -> str:
+        return fmt(None if timing is None else timing[key], 1)
+
+    daemon = (
+        f"640×480: median {bench(vga, 'median_ms')} ms, p95 {bench(vga, 'p95_ms')}; "
+        f"320×240: {bench(qvga, 'median_ms')} ms"
+    )
+    families = ", ".join(
+        f"`{name}` {fmt(field(load_optional(eval_dir, name), b, 'aepe_px'))}"
+        for name, _ in FAMILIES
+    )
+
+    def link(text: str, section: str) -> str:
+        return f"[{text}](RESULTS.md#{SECTION[section]})"
+
+    rows = [
+        (
+            "Refinement at the true calibration, MAE all",
+            f"ToF input {mae(aligned, 'raw-tof')} cm, classical filter "
+            f"{mae(aligned, 'static+classical-filter')}, `{b}` {mae(aligned, refine)}",
+            link("aligned input", "refinement"),
+        ),
+        (
+            "Same, sensors and scenes outside every training range",
+            f"input {mae(heldout, 'raw-tof')} cm, classical "
+            f"{mae(heldout, 'static+classical-filter')}, `{b}` {mae(heldout, refine)}",
+            link("held-out family", "heldout"),
+        ),
+        ("Whole pipeline at σ = 4 px misalignment", whole, link("whole pipeline", "whole")),
+        (
+            f"Online recalibration, {sequence_frames}-frame drifting sequence",
+            online,
+            link("online recalibration", "online"),
+        ),
+        (
+            "`deard` time per frame, online (`deard-bench`)",
+            daemon,
+            link("daemon's time per frame", "daemon"),
+        ),
+        (
+            "Known limit: clean input (bright, single bounce)",
+            f"input {mae(clean, 'raw-tof')} cm, `{b}` {mae(clean, refine)}, "
+            f"`{b}-guarded` {mae(clean, f'{b}-guarded refine @ true calibration')}",
+            link("every family", "families"),
+        ),
+        (
+            f"Aligned frames (a correct factory calibration), final AEPE of `{b}` per family (px)",
+            families,
+            link("every family", "families"),
+        ),
+    ]
+    return [
+        "| What | Figure | RESULTS.md section |",
+        "|---|---|---|",
+        *(f"| {what} | {figure} | {section} |" for what, figure, section in rows),
+    ]
+
+
+def headline_block(text: str, path: Path) -> tuple[int, int]:
+    """Where the headline block's content lies in a README's text: (start, end), between the
+    two marker lines; ValueError naming the file when a marker is missing or out of order."""
+    begin, end = text.find(HEADLINE_BEGIN), text.find(HEADLINE_END)
+    if begin < 0 or end < 0 or end < begin:
+        raise ValueError(
+            f"{path}: the headline figures must lie between a line {HEADLINE_BEGIN!r} and a "
+            f"later line {HEADLINE_END!r}"
+        )
+    return begin + len(HEADLINE_BEGIN), end
+
+
+def write_headline(readme: str, table: list[str], path: Path) -> str:
+    """The README's text with the headline block replaced by `table`, the rest unchanged."""
+    start, end = headline_block(readme, path)
+    return readme[:start] + "\n\n" + "\n".join(table) + "\n\n" + readme[end:]
+
+
+#: A number as the documents write it: digits with an optional decimal part, not part of a
+#: word ("p95", "x86") nor of a longer number.
+NUMBER = re.compile(r"(?<![\w.])\d+(?:\.\d+)?(?![\w]|\.\d)")
+
+
+def figures_not_in_results(
+    readme: str, results: str, readme_path: Path = Path("README.md")
+) -> list[str]:
+    """The numbers of the README's headline block (link targets left out) that RESULTS.md does
+    not contain as a number written the same way; empty when every figure is backed."""
+    start, end = headline_block(readme, readme_path)
+    block = re.sub(r"\]\([^)]*\)", "]", readme[start:end])
+    known = set(NUMBER.findall(results))
+    return [n for n in NUMBER.findall(block) if n not in known]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--eval", type=Path, required=True, help="dear eval outputs per set")
@@ -555,18 +750,28 @@ def main() -> None:
         default=Path(__file__).with_name("results_commentary.md"),
         help="hand-written discussion appended after the tables",
     )
+    parser.add_argument(
+        "--readme",
+        type=Path,
+        default=Path(__file__).resolve().parents[1] / "README.md",
+        help="README whose headline block (between its marker comments) is rewritten "
+        "(default: the repository's README.md)",
+    )
     args = parser.parse_args()
+    # Refuse a README without the markers before anything is written.
+    readme = write_headline(args.readme.read_text(), headline_table(args.eval), args.readme)
 
     aligned = load(args.eval, "aligned")
     sets = {s: load(args.eval, f"sigma{s}") for s in SIGMAS}
     heldout = load(args.eval, "heldout")
     heldout_sigma4 = load(args.eval, "heldout-sigma4")
-    large = {s: load(args.eval, f"sigma{s}") for s in LARGE_SIGMAS}
+    large_sets = {s: load_optional(args.eval, f"sigma{s}") for s in LARGE_SIGMAS}
+    large = {s: r for s, r in large_sets.items() if r is not None}
     frames = aligned["__file__"]["frames_evaluated"]
-    sequence = load(args.eval, "sequence")
+    sequence = load_optional(args.eval, "sequence")
     # Frames from a network frame to the delivery of its measurement (eval.json of dear eval
     # --online; 0: measured on the frame itself).
-    delay = sequence["__file__"].get("online_delay_frames", 0)
+    delay = "–" if sequence is None else sequence["__file__"].get("online_delay_frames", 0)
     untracked_path = args.eval / "sequence-untracked" / "eval.json"
     untracked = load(args.eval, "sequence-untracked") if untracked_path.is_file() else None
 
@@ -625,9 +830,11 @@ def main() -> None:
             "a dropped phone or a re-seated module."
         ),
         "",
-        *table_large(large),
-        "",
-        large_paragraph(large),
+        *(
+            [*table_large(large), "", large_paragraph(large)]
+            if len(large) == len(LARGE_SIGMAS)
+            else [missing(args.eval, [f"sigma{s}" for s in LARGE_SIGMAS])]
+        ),
         "",
         "## Held-out family: sensors and scenes no training run sampled",
         "",
@@ -664,6 +871,14 @@ def main() -> None:
         "",
         *table_families(args.eval),
         "",
+        (
+            "Alignment on the same sets: the frames are aligned and the factory calibration is "
+            "correct, so the chain should leave it alone; AEPE of the flow each method aligned "
+            "with (px)."
+        ),
+        "",
+        *table_families_aepe(args.eval),
+        "",
         "Reliability of the expected-error confidence on the held-out family (refinement at the "
         "true calibration; `dear_proto::confidence`): per bin of the predicted error, the "
         "error measured against the ground truth.",
@@ -674,7 +889,8 @@ def main() -> None:
         "## Online recalibration on a drifting calibration (beyond the paper)",
         "",
         (
-            f"{sequence['__file__']['frames_evaluated']} frames of a moving scene whose "
+            f"{'–' if sequence is None else sequence['__file__']['frames_evaluated']} frames of "
+            "a moving scene whose "
             "principal point drifts (sinusoids, 4 px peak; `dear-synth sequence --seed 77`). "
             "AEPE is the error of the flow each frame was aligned with; the per-frame error "
             "over time is in `out/results/sequence/tracking.csv`; flicker is the mean "
@@ -689,7 +905,11 @@ def main() -> None:
             "on the second core."
         ),
         "",
-        *table_tracking(sequence, untracked),
+        *(
+            table_tracking(sequence, untracked)
+            if sequence is not None
+            else [missing(args.eval, ["sequence"])]
+        ),
         "",
     ]
     doc += [
@@ -745,6 +965,7 @@ def main() -> None:
         "",
     ]
     args.out.write_text("\n".join(doc))
+    args.readme.write_text(readme)
 
 
 if __name__ == "__main__":
