@@ -59,5 +59,6 @@ end=$(date +%s.%N)
 # The last line ("stopped") has the totals; strip the log's colour codes first.
 totals=$(sed 's/\x1b\[[0-9;]*m//g' "$log" | grep 'stopped' | tail -1 |
     grep -o '\(published\|skipped\|dropped\)=[0-9]*' | tr '\n' ' ')
-echo "replay_drops.sh: $deard, $looped in $(awk -v a="$start" -v b="$end" 'BEGIN { printf "%.0f", b - a }') s, load $(cut -d' ' -f1-3 /proc/loadavg): $totals"
+late=$(sed 's/\x1b\[[0-9;]*m//g' "$log" | { grep -o 'late_frames=[0-9]*' || true; } | awk -F= '{ n += $2 } END { print n + 0 }')
+echo "replay_drops.sh: $deard, $looped in $(awk -v a="$start" -v b="$end" 'BEGIN { printf "%.0f", b - a }') s, load $(cut -d' ' -f1-3 /proc/loadavg): $totals late=$late (handed on >10 ms after due)"
 echo "daemon log: $log"

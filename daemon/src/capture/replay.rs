@@ -27,6 +27,9 @@ pub const PREFETCH_AHEAD: usize = 4;
 /// before the background calibration worker (nice +19).
 pub const PREFETCH_NICE: i32 = 10;
 
+/// A paced frame handed on later than this after its due time is counted late.
+const LATE: Duration = Duration::from_millis(10);
+
 /// How long a wait for the decoder lasts before the shutdown flag is looked at again.
 const WAIT_SLICE: Duration = Duration::from_millis(20);
 
@@ -70,6 +73,8 @@ pub struct ReplaySource {
     good_in_pass: usize,
     /// Why the last unreadable frame could not be read.
     last_error: Option<String>,
+    /// Frames of this pass handed on more than [`LATE`] after they were due.
+    late_in_pass: usize,
     /// Once the replay is over: `None` for its end, `Some(reason)` for a failure; every later
     /// call returns the same.
     over: Option<Option<String>>,
@@ -119,6 +124,7 @@ impl ReplaySource {
             pass_origin: None,
             good_in_pass: 0,
             last_error: None,
+            late_in_pass: 0,
             over: None,
         })
     }
@@ -132,7 +138,25 @@ impl ReplaySource {
         let stamp = self.dir.manifest().frames[position].timestamp_ns;
         let (origin, origin_stamp) = *self.pass_origin.get_or_insert((Instant::now(), stamp));
         let due = origin + Duration::from_nanos(stamp.saturating_sub(origin_stamp));
-        sleep_unless(shutdown, due.saturating_duration_since(Instant::now()))
+        let now = Instant::now();
+        if now > due + LATE {
+            self.late_in_pass += 1;
+        }
+        sleep_unless(shutdown, due.saturating_duration_since(now))
+    }
+
+    /// Logs the pass that just ended, when frames of it were handed on late (their decoding, or
+    /// the capture thread, was behind when they were due: a machine too busy for them), and
+    /// starts the next pass's count.
+    fn end_pass(&mut self) {
+        if self.late_in_pass > 0 {
+            tracing::info!(
+                late_frames = self.late_in_pass,
+                late_by_more_than_ms = LATE.as_millis() as u64,
+                "replay pass ended with frames handed on late: the decoder or the capture thread was behind when they were due"
+            );
+        }
+        self.late_in_pass = 0;
     }
 
     /// The reason for a pass over `start..end` that read no frame.
@@ -183,6 +207,7 @@ impl FrameSource for ReplaySource {
             };
             let (position, frame, decode) = match item {
                 Prefetched::EndOfPass => {
+                    self.end_pass();
                     // A pass in which every frame was skipped would repeat forever (looping)
                     // or leave a service with nothing to serve (not looping).
                     if self.good_in_pass == 0 {
