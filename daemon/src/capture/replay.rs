@@ -292,42 +292,12 @@ impl FrameSource for ReplaySource {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::path::{Path, PathBuf};
+    use std::path::PathBuf;
     use std::sync::atomic::Ordering;
     use std::sync::Arc;
 
-    use dear_capture::FramePaths;
-
-    /// A capture at `root` with one frame per `(timestamp_ns, readable)`, copied from
-    /// `samples/demo`'s first frame; unreadable frames have a truncated depth PNG.
-    fn write_capture(root: &Path, frames: &[(u64, bool)]) -> PathBuf {
-        let demo = CaptureDir::open(concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo"))
-            .expect("samples/demo opens");
-        let source = demo.frame_paths(0);
-        let mut manifest = demo.manifest().clone();
-        let template = manifest.frames[0].clone();
-        manifest.frames.clear();
-        std::fs::create_dir_all(root.join("frames")).unwrap();
-        for (id, &(timestamp_ns, readable)) in frames.iter().enumerate() {
-            let paths = FramePaths::new(root, id as u64);
-            std::fs::copy(&source.rgb, &paths.rgb).unwrap();
-            std::fs::copy(&source.amplitude, &paths.amplitude).unwrap();
-            std::fs::copy(&source.depth, &paths.depth).unwrap();
-            if !readable {
-                std::fs::write(&paths.depth, b"\x89PNG truncated").unwrap();
-            }
-            let mut entry = template.clone();
-            entry.id = id as u64;
-            entry.timestamp_ns = timestamp_ns;
-            manifest.frames.push(entry);
-        }
-        std::fs::write(
-            root.join("capture.json"),
-            serde_json::to_string(&manifest).unwrap(),
-        )
-        .unwrap();
-        root.to_path_buf()
-    }
+    /// The shared writer: copies of `samples/demo`'s first frame, unreadable ones truncated.
+    use dear_test_support::capture::write_demo_copies as write_capture;
 
     fn open(path: PathBuf, pacing: Pacing, loop_: bool) -> ReplaySource {
         ReplaySource::open(&CaptureConfig {
