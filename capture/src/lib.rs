@@ -11,7 +11,8 @@
 //!   [`Sample`]), and [`calibration`] the weak-calibration model the ground truth is given in.
 //!
 //! Every error names the file it is about ([`CaptureError::path`]). The crate knows nothing of
-//! the algorithm: `dear-pipeline` re-exports it as `dear_pipeline::capture`.
+//! the algorithm; every crate that reads frames, flows or calibrations names them here
+//! (`dear_capture::RgbdFrame`, not through `dear-pipeline`).
 
 pub mod calibration;
 pub mod error;

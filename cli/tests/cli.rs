@@ -11,7 +11,7 @@ use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use dear_pipeline::capture::CaptureDir;
+use dear_capture::CaptureDir;
 use dear_proto::service::{frame_event_service, frame_service, FrameEventService, FrameService};
 use dear_proto::Transport;
 use dear_proto::{flags, random_run_id, FrameHeader, PayloadLayout, Stage};

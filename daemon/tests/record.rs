@@ -5,7 +5,7 @@
 
 use std::process::Command;
 
-use dear_pipeline::capture::CaptureDir;
+use dear_capture::CaptureDir;
 use dear_test_support::process::unique_service;
 
 #[test]
@@ -80,7 +80,7 @@ fn a_record_directory_with_files_in_it_stops_the_daemon_naming_it() {
 /// counts it in its log.
 #[test]
 fn depth_beyond_the_unambiguous_range_is_marked_invalid_and_counted() {
-    use dear_pipeline::capture::FramePaths;
+    use dear_capture::FramePaths;
 
     const FRAMES: usize = 3;
     // 50 MHz: 2.998 m, through the middle of the demo scene's depths (0.02 .. 7.4 m).

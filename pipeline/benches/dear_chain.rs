@@ -12,12 +12,12 @@ use std::hint::black_box;
 use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use dear_capture::{Calibration, Flow};
 use dear_pipeline::dear::{
     CachedFusion, ChainInput, ChainMode, ChainOptions, ChainOutput, DearChain,
 };
 use dear_pipeline::model::kernel_apply::{apply_gated, GatedKernel, GATED_CHANNELS};
 use dear_pipeline::model::{ModelBundle, RunnerOptions};
-use dear_pipeline::{Calibration, Flow};
 use ndarray::{Array2, Array3};
 
 // The daemon's allocator (see deard's main.rs: with glibc's malloc, tract's large intermediate

@@ -6,9 +6,9 @@
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use dear_capture::Calibration;
 use dear_pipeline::filter::ClassicalRefiner;
 use dear_pipeline::geometry::{flow_from_depth, warp_depth, warp_rgb};
-use dear_pipeline::Calibration;
 use ndarray::{Array2, Array3};
 
 const H: usize = 480;

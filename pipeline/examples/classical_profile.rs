@@ -16,7 +16,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use dear_pipeline::capture::CaptureDir;
+use dear_capture::CaptureDir;
 use dear_pipeline::filter::domain_transform::{domain_transform_masked, DomainTransformScratch};
 use dear_pipeline::filter::fill::fill_holes;
 use dear_pipeline::filter::flying::remove_flying_pixels;

@@ -23,19 +23,19 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use dear_capture::frame::Flow;
+use dear_capture::Calibration;
+use dear_capture::CaptureDir;
 use dear_pipeline::align::StaticAligner;
-use dear_pipeline::capture::CaptureDir;
 use dear_pipeline::dear::confidence::confidence_into;
 use dear_pipeline::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
 use dear_pipeline::direct::{estimate_calibration_direct, DirectFitParams};
 use dear_pipeline::filter::ClassicalRefiner;
-use dear_pipeline::frame::Flow;
 use dear_pipeline::geometry::RobustOptions;
 use dear_pipeline::geometry::{warp_depth, warp_depth_and_bilinear};
 use dear_pipeline::model::{BundleRunner, ModelBundle, RunnerOptions};
 use dear_pipeline::online::residual::EdgeCheck;
 use dear_pipeline::online::Measurement;
-use dear_pipeline::Calibration;
 use ndarray::Array2;
 
 #[global_allocator]
@@ -211,7 +211,7 @@ fn main() {
 }
 
 /// Times the parts of the worker's measurement on `f`, `n` times, and prints the fits' bits.
-fn profile_worker(bundle: &ModelBundle, f: &dear_pipeline::capture::RgbdFrame, n: usize) {
+fn profile_worker(bundle: &ModelBundle, f: &dear_capture::RgbdFrame, n: usize) {
     let (h, w) = f.dim();
     let mut runner = BundleRunner::new(bundle, w, h).unwrap();
     let norm = bundle.normalisation();

@@ -12,9 +12,9 @@
 
 use ndarray::{ArrayView2, ArrayViewMut2};
 
-use crate::calibration::Calibration;
-use crate::frame::Flow;
 use crate::geometry::SplatScratch;
+use dear_capture::calibration::Calibration;
+use dear_capture::frame::Flow;
 
 /// Aligns depth with a given calibration; keeps the flow of the last frame for warping other
 /// ToF images (amplitude) the same way.

@@ -58,10 +58,10 @@
 
 use ndarray::{Array2, ArrayView2, ArrayView3};
 
-use crate::calibration::Calibration;
 use crate::edges::{gradient_magnitude, normalise_by_p99, rgb_to_gray};
 use crate::geometry::surface::is_valid_depth;
 use crate::online::observability::{Information, EDGE_PIXELS_PER_SAMPLE};
+use dear_capture::calibration::Calibration;
 
 /// Settings of [`estimate_calibration_direct`].
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -58,8 +58,8 @@ pub(crate) fn normalise_by_p99(g: &mut Array2<f32>, sample_stride: usize) {
 pub(crate) mod test_scene {
     use ndarray::{Array2, Array3};
 
-    use crate::calibration::Calibration;
     use crate::geometry::synthesize_view;
+    use dear_capture::calibration::Calibration;
 
     /// Discs at several depths in front of a slanted wall, seen by the ToF camera, and the RGB
     /// view of the scene through `truth` (RGB pixel `p` sees ToF pixel `p + W(p)`). RGB and

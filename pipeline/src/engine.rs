@@ -37,7 +37,6 @@ use std::num::NonZeroU32;
 
 use dear_proto::CalibrationHealth;
 
-use crate::calibration::Calibration;
 use crate::dear::{
     BackgroundCalibrator, ChainError, ChainInput, ChainMode, ChainOutput, ChainReport, DearChain,
     DelayedCalibrator, Delivered, MeasureReport, Prepared, RefinementCheck, Submit,
@@ -45,6 +44,7 @@ use crate::dear::{
 use crate::geometry::LsqError;
 use crate::model::{BundleError, ModelBundle};
 use crate::online::{Measurement, NetworkTicket, OnlineCalibrator, OnlineConfig};
+use dear_capture::calibration::Calibration;
 
 /// The worker thread's name (`top -H`, debuggers): the daemon is the engine's one user of it.
 const WORKER_THREAD_NAME: &str = "deard-calibrate";

@@ -1,11 +1,11 @@
 //! `dear-pipeline`: the DEAR algorithm, independent of how frames are captured or published.
+//! The frame, flow and calibration types it works on (and the capture-directory format) are
+//! the `dear-capture` crate's: [`dear_capture::RgbdFrame`], [`dear_capture::Flow`],
+//! [`dear_capture::Calibration`] (the weak-calibration flow model `W = t / z + c`).
 //!
 //! - [`align`]: aligning ToF depth to RGB with a known calibration;
-//! - [`calibration`]: the weak-calibration flow model `W = t / z + c` (from `dear-capture`);
-//! - [`frame`]: in-memory images of one RGB-D frame (from `dear-capture`);
 //! - [`edges`]: RGB and amplitude edge maps on one scale (what the direct fit compares);
 //! - [`direct`]: direct fit of the calibration to all edge pixels at once (edge correlation);
-//! - [`capture`]: the capture-directory format (read, validate, write): the `dear-capture` crate;
 //! - [`geometry`]: warping, least-squares calibration, depth↔flow, forward splatting;
 //! - [`metrics`]: AEPE and the paper's quantile-split depth MAE;
 //! - [`evaluate`]: methods (with the classical edge-matching baseline) and metric accumulation
@@ -36,10 +36,3 @@ pub mod model;
 pub mod online;
 pub mod simd;
 mod vector_math;
-
-// The capture format and the frame and calibration types it reads are the `dear-capture`
-// crate; these paths keep `dear_pipeline::capture`, `crate::frame` and the like working.
-pub use dear_capture as capture;
-pub use dear_capture::{calibration, frame};
-pub use dear_capture::{Calibration, Flow, RgbdFrame};
-pub use geometry::is_valid_depth;

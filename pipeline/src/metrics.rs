@@ -21,8 +21,8 @@
 
 use ndarray::{ArrayView2, Zip};
 
-use crate::frame::Flow;
 use crate::geometry::is_valid_depth;
+use dear_capture::frame::Flow;
 
 /// The paper's evaluation range: MAE is computed where the ground truth is within 4 m.
 pub const MAX_EVAL_DEPTH_M: f32 = 4.0;

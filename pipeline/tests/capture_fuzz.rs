@@ -14,8 +14,8 @@ use std::cell::Cell;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use dear_pipeline::capture::{flo, png, CaptureDir, CaptureError, FramePaths};
-use dear_pipeline::Flow;
+use dear_capture::Flow;
+use dear_capture::{flo, png, CaptureDir, CaptureError, FramePaths};
 use mutate::{apply_bytes, apply_json, arbitrary_json, byte_edits, json_edit, top_key};
 use ndarray::Array2;
 use proptest::prelude::*;

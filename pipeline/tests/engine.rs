@@ -7,7 +7,8 @@
 use std::num::NonZeroU32;
 use std::path::{Path, PathBuf};
 
-use dear_pipeline::capture::CaptureDir;
+use dear_capture::CaptureDir;
+use dear_capture::{Calibration, RgbdFrame};
 use dear_pipeline::dear::{ChainInput, ChainOutput, DearChain};
 use dear_pipeline::engine::{
     CalibrationPolicy, EngineConfig, FrameEngine, FrameReport, MeasurementSchedule,
@@ -15,7 +16,6 @@ use dear_pipeline::engine::{
 use dear_pipeline::model::ModelBundle;
 use dear_pipeline::online::observability::Information;
 use dear_pipeline::online::OnlineConfig;
-use dear_pipeline::{Calibration, RgbdFrame};
 use ndarray::Array2;
 
 fn root() -> PathBuf {

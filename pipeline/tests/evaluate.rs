@@ -1,12 +1,12 @@
 //! The evaluation engine on a scene with known misalignment: the oracle calibration must beat
 //! the static one, and the numbers must match what the geometry implies.
 
-use dear_pipeline::capture::{GroundTruth, Sample};
+use dear_capture::{Calibration, RgbdFrame};
+use dear_capture::{GroundTruth, Sample};
 use dear_pipeline::evaluate::{
     ground_truth_flow, ground_truth_mask, Evaluation, Method, MethodRunner,
 };
 use dear_pipeline::geometry::synthesize_view;
-use dear_pipeline::{Calibration, RgbdFrame};
 use ndarray::{Array2, Array3};
 
 fn misaligned_frame(perturbation: Calibration) -> Sample {

@@ -80,7 +80,7 @@ fn the_guarded_refiner_does_less_harm_to_clean_depth_and_says_how_wrong_it_expec
 }
 
 /// The measurement as a method's output (the "ToF input" row).
-fn raw(sample: &dear_pipeline::capture::Sample) -> dear_pipeline::evaluate::MethodOutput {
+fn raw(sample: &dear_capture::Sample) -> dear_pipeline::evaluate::MethodOutput {
     dear_pipeline::evaluate::MethodOutput {
         depth: sample.frame.depth.clone(),
         flow: None,

@@ -10,11 +10,11 @@
 
 mod common;
 
+use dear_capture::Flow;
 use dear_pipeline::metrics::{
     aepe, DepthErrorSplit, Reliability, TemporalChange, CLASSES, MAX_EVAL_DEPTH_M,
     RELIABILITY_EDGES_CM, STATIC_TOLERANCE_M,
 };
-use dear_pipeline::Flow;
 use ndarray::{concatenate, Array2, Axis, Zip};
 use serde_json::Value;
 

@@ -5,8 +5,8 @@
 
 use std::path::{Path, PathBuf};
 
+use dear_capture::Flow;
 use dear_pipeline::model::{BundleError, BundleRunner, ModelBundle};
-use dear_pipeline::Flow;
 use ndarray::Array2;
 
 fn smoke_bundle() -> PathBuf {

@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
-use dear_pipeline::capture::CaptureDir;
+use dear_capture::CaptureDir;
 use dear_pipeline::engine::{typical_delay_frames, MeasurementSchedule};
 use dear_pipeline::evaluate::{
     ground_truth_flow, ground_truth_mask, BundleMethod, Evaluation, Method, MethodRunner,

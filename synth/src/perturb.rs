@@ -62,7 +62,7 @@ pub fn median_valid(depth: &ndarray::Array2<f32>) -> Option<f64> {
     let mut v: Vec<f32> = depth
         .iter()
         .copied()
-        .filter(|&z| dear_pipeline::is_valid_depth(z))
+        .filter(|&z| dear_capture::is_valid_depth(z))
         .collect();
     dear_stats::upper_median(&mut v).map(f64::from)
 }

@@ -1,8 +1,8 @@
 //! The simulator's outputs through the capture format: generate → read back → perturb →
 //! sequence, checking contents, not only that files appear.
 
-use dear_pipeline::capture::CaptureDir;
-use dear_pipeline::Calibration;
+use dear_capture::Calibration;
+use dear_capture::CaptureDir;
 use dear_synth::dataset::{generate, GenerateParams};
 use dear_synth::perturb::{perturb_dir, PerturbMode};
 use dear_synth::scene::SceneConfig;

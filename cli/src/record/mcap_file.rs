@@ -502,7 +502,7 @@ impl<W: Write + Seek> Recorder<W> {
 /// values, which deard does not publish), valid depth is at least 1 mm (a positive depth under
 /// 0.5 mm must not become "invalid") and at most 65535 mm (`true`: saturated).
 fn depth_mm(z: f32) -> (u16, bool) {
-    if !dear_pipeline::is_valid_depth(z) {
+    if !dear_capture::is_valid_depth(z) {
         return (0, false);
     }
     let mm = (f64::from(z) * 1000.0).round();

@@ -35,8 +35,8 @@ use std::time::{Duration, Instant};
 
 use ndarray::{Array2, Array3};
 
-use crate::calibration::Calibration;
 use crate::dear::chain::{ChainError, ChainInput, DearChain, MeasureReport};
+use dear_capture::calibration::Calibration;
 
 /// The worker's nice value relative to the caller (Linux: nice is per thread); see the module
 /// documentation for why the lowest.

@@ -21,17 +21,17 @@ use std::time::{Duration, Instant};
 use ndarray::{Array2, ArrayView2, ArrayView3, ArrayViewMut2, Zip};
 
 use crate::align::StaticAligner;
-use crate::calibration::Calibration;
 use crate::dear::confidence::{confidence_into, expected_error_confidence_into};
 use crate::dear::output_guard::{OutputGuard, RefinementCheck};
 use crate::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
 use crate::direct::{estimate_calibration_direct_against, DirectFitParams};
 use crate::filter::ClassicalRefiner;
-use crate::frame::Flow;
 use crate::geometry::{warp_depth, warp_depth_and_bilinear, LsqError, RobustOptions};
 use crate::model::{BundleError, BundleRunner, ModelBundle, Normalisation, RunnerOptions};
 use crate::online::residual::{EdgeAlignment, EdgeCheck};
 use crate::online::Measurement;
+use dear_capture::calibration::Calibration;
+use dear_capture::frame::Flow;
 
 /// How one frame is aligned.
 #[derive(Debug, Clone, Copy, PartialEq)]

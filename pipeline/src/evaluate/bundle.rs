@@ -14,14 +14,14 @@
 use ndarray::Array2;
 
 use super::methods::MethodOutput;
-use crate::capture::Sample;
 use crate::dear::{ChainError, ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
 use crate::engine::{
     CalibrationPolicy, EngineConfig, EngineError, FrameEngine, FrameReport, MeasurementSchedule,
 };
 use crate::model::{BundleError, ModelBundle};
 use crate::online::OnlineConfig;
-use crate::{Calibration, RgbdFrame};
+use dear_capture::Sample;
+use dear_capture::{Calibration, RgbdFrame};
 
 /// The outputs of one chain run.
 #[derive(Debug, Clone)]

@@ -11,10 +11,10 @@
 
 use ndarray::{Array2, ArrayView2, ArrayView3};
 
-use crate::calibration::Calibration;
 use crate::edges::{gradient_magnitude, rgb_to_gray};
-use crate::frame::Flow;
 use crate::geometry::{solve_calibration_robust, CalibrationFit, LsqError, RobustOptions};
+use dear_capture::calibration::Calibration;
+use dear_capture::frame::Flow;
 
 /// Settings of [`estimate_calibration`].
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -6,11 +6,11 @@ use ndarray::Array2;
 
 use super::edge_matching::{estimate_calibration_or, EdgeMatchParams};
 use crate::align::StaticAligner;
-use crate::capture::Sample;
 use crate::direct::{estimate_calibration_direct, DirectFitParams};
 use crate::filter::ClassicalRefiner;
-use crate::frame::Flow;
-use crate::Calibration;
+use dear_capture::frame::Flow;
+use dear_capture::Calibration;
+use dear_capture::Sample;
 
 /// One row of the comparison.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

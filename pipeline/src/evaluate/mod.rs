@@ -16,9 +16,9 @@ pub use report::{Evaluation, MethodReport};
 
 use ndarray::{Array2, Zip};
 
-use crate::capture::flo::UNKNOWN_FLOW;
-use crate::capture::Sample;
-use crate::Flow;
+use dear_capture::flo::UNKNOWN_FLOW;
+use dear_capture::Flow;
+use dear_capture::Sample;
 
 /// Why a frame cannot be evaluated.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

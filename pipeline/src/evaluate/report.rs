@@ -3,11 +3,11 @@
 use serde::Serialize;
 
 use super::methods::MethodOutput;
-use crate::capture::Sample;
 use crate::metrics::{
     aepe, DepthErrorSplit, Reliability, ReliabilityBin, TemporalChange, CLASSES, MAX_EVAL_DEPTH_M,
 };
-use crate::Flow;
+use dear_capture::Flow;
+use dear_capture::Sample;
 use ndarray::{Array2, ArrayView2};
 
 /// Accumulated results of one method.

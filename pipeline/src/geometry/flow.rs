@@ -5,8 +5,8 @@
 
 use ndarray::{Array2, ArrayView2, ArrayViewMut2, Zip};
 
-use crate::calibration::Calibration;
-use crate::frame::Flow;
+use dear_capture::calibration::Calibration;
+use dear_capture::frame::Flow;
 
 /// The flow the calibration predicts from a depth map on the RGB grid, and where it is
 /// defined. Invalid depth (`≤ 0` or non-finite) → flow `(0, 0)`, `valid = false`.

@@ -15,9 +15,9 @@
 use ndarray::ArrayView2;
 use thiserror::Error;
 
-use crate::calibration::Calibration;
-use crate::frame::Flow;
 use crate::geometry::surface::is_valid_depth;
+use dear_capture::calibration::Calibration;
+use dear_capture::frame::Flow;
 
 /// Fewest usable pixels for a fit: two unknowns per axis, plus one so the residual means
 /// something.

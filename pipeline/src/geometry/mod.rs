@@ -3,7 +3,7 @@
 //! Conventions shared by every sub-module (and by the Python training package, which checks
 //! itself against the test vectors in `fixtures/geometry/`):
 //! - images are row-major `(row, column)`; pixel centres sit at integer coordinates;
-//! - a [`Flow`](crate::Flow) is defined on the grid of the image being produced: `u` moves along
+//! - a [`Flow`](dear_capture::Flow) is defined on the grid of the image being produced: `u` moves along
 //!   columns (x), `v` along rows (y);
 //! - backward warping reads `out(p) = src(p + W(p))`; a sample point outside the convex hull of
 //!   the source's pixel centres is *invalid*, never clamped and never read as a zero depth.
@@ -11,7 +11,7 @@
 //! Modules:
 //! - [`warp`]: backward warping of depth (discontinuity-aware), amplitude and RGB;
 //! - [`lsq`]: the paper's per-axis least squares for `(t, c)`, plain and robust (IRLS/Huber);
-//! - [`flow`]: depth → flow through a [`Calibration`](crate::Calibration);
+//! - [`flow`]: depth → flow through a [`Calibration`](dear_capture::Calibration);
 //! - [`splat`]: forward splatting with a z-buffer, to synthesise a perturbed RGB view;
 //! - [`register`]: a live ToF image onto the RGB grid with the module's factory rotation and
 //!   intrinsics (the translation is left to the chain's calibration);
@@ -30,5 +30,5 @@ pub use lsq::{
 pub use splat::{
     splat_depth_into, splat_depth_with, synthesize_view, SplatScratch, SynthesizedView,
 };
-pub use surface::is_valid_depth;
+pub(crate) use surface::is_valid_depth;
 pub use warp::{warp_bilinear, warp_depth, warp_depth_and_bilinear, warp_rgb};

@@ -19,8 +19,8 @@
 use ndarray::{ArrayView2, ArrayViewMut2, Axis};
 use rayon::prelude::*;
 
-use crate::capture::Intrinsics;
 use crate::geometry::is_valid_depth;
+use dear_capture::Intrinsics;
 
 /// Rotation (row-major, ToF → RGB) and the two cameras' intrinsics.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -25,10 +25,10 @@
 use ndarray::{Array2, Array3, ArrayView2, ArrayView3, ArrayViewMut2, Axis};
 use rayon::prelude::*;
 
-use crate::calibration::Calibration;
-use crate::frame::Flow;
 use crate::geometry::surface::{is_valid_depth, is_valid_depth_branchless, same_surface};
 use crate::geometry::warp::bilinear_weights;
+use dear_capture::calibration::Calibration;
+use dear_capture::frame::Flow;
 
 /// Contributions at or below this bilinear weight are ignored.
 pub const SPLAT_MIN_WEIGHT: f32 = 1e-3;

@@ -30,7 +30,7 @@ pub fn same_surface(z_ref: f32, z: f32) -> bool {
 }
 
 /// The one validity rule of a depth sample, defined with the capture format that stores it.
-pub use dear_capture::is_valid_depth;
+pub(crate) use dear_capture::is_valid_depth;
 
 /// [`is_valid_depth`] without short-circuits (`z > 0` and below +∞, so finite: NaN fails the
 /// first comparison), for loops written with selects so that they vectorise: a short-circuit

@@ -15,9 +15,9 @@ use ndarray::{
     Ix2, Zip,
 };
 
-use crate::frame::Flow;
 use crate::geometry::surface::{is_valid_depth_branchless, surface_tolerance};
 use crate::vector_math::floor_small;
+use dear_capture::frame::Flow;
 
 /// The four bilinear neighbours of a sample point and their weights, in the fixed order
 /// `(y0,x0), (y0,x1), (y1,x0), (y1,x1)` (ties between equal weights go to the earlier one).

@@ -14,11 +14,11 @@
 use ndarray::{Array2, ArrayView2, ArrayViewMut2};
 use tract_onnx::prelude::*;
 
-use crate::frame::Flow;
 use crate::model::bundle::{LoadedGraph, ModelBundle};
 use crate::model::error::BundleError;
 use crate::model::kernel_apply::{apply_gated, blend_classical, select_guarded, GatedKernel};
 use crate::model::manifest::{output_contract, GraphOutput, GraphRole};
+use dear_capture::frame::Flow;
 
 /// Largest padded side a runner accepts: beyond it a single plane is gigabytes.
 pub const MAX_SIDE: usize = 16384;

@@ -64,11 +64,11 @@ use std::collections::VecDeque;
 
 use dear_proto::CalibrationHealth;
 
-use crate::calibration::Calibration;
 use crate::geometry::LsqError;
 use crate::online::measurement::{Evidence, Measurement};
 use crate::online::observability::{Information, Observability};
 use crate::online::residual::EdgeAlignment;
+use dear_capture::calibration::Calibration;
 
 /// Settings of [`OnlineCalibrator`].
 #[derive(Debug, Clone, Copy, PartialEq)]

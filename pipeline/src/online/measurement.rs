@@ -5,12 +5,12 @@
 
 use ndarray::{ArrayView2, Zip};
 
-use crate::calibration::Calibration;
 use crate::direct::DirectFit;
-use crate::frame::Flow;
 use crate::geometry::surface::is_valid_depth;
 use crate::geometry::{solve_calibration_robust, LsqError, RobustOptions};
 use crate::online::observability::{Information, Observability, FLOW_PIXELS_PER_SAMPLE};
+use dear_capture::calibration::Calibration;
+use dear_capture::frame::Flow;
 
 /// A calibration fit of one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -20,7 +20,7 @@
 //! read the result ([`crate::online::OnlineConfig::max_direction_std_px`]) were set with these
 //! values on the simulator's families, so the two go together.
 
-use crate::calibration::Calibration;
+use dear_capture::calibration::Calibration;
 
 /// ToF pixels per independent sample of the direct fit's edge residual: the edge maps are a
 /// 3×3 Sobel gradient blurred by a Gaussian of σ = 1 px, correlated over about 3×3 px.

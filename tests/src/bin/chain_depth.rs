@@ -27,9 +27,9 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use clap::{Parser, Subcommand};
+use dear_capture::is_valid_depth;
 use dear_capture::CaptureDir;
 use dear_pipeline::evaluate::BundleMethod;
-use dear_pipeline::is_valid_depth;
 use dear_pipeline::model::ModelBundle;
 
 const MAGIC: &[u8; 8] = b"DEARDPT1";

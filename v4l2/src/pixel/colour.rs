@@ -1,5 +1,5 @@
 //! Colour formats into interleaved RGB8 `(H, W, 3)`, the layout of
-//! `dear_pipeline::RgbdFrame::rgb`, so a capture loop decodes straight into a frame.
+//! `dear_capture::RgbdFrame::rgb`, so a capture loop decodes straight into a frame.
 //!
 //! `YUYV` and `NV12` are converted as BT.601 limited-range ("studio swing") YCbCr, what UVC and
 //! most CSI colour cameras deliver: Y in 16..235 and Cb, Cr in 16..240 around 128, with the

@@ -13,7 +13,7 @@
 //! - [`phase`]: host-side demodulation of 4-phase ToF raw frames (`Y12 `, `Y12P`), and radial
 //!   distance → z-depth.
 //! - [`colour`]: `YUYV`, `NV12`, `RGB3` and `MJPG` into `(H, W, 3)` RGB8, the layout of
-//!   `dear_pipeline::RgbdFrame::rgb`.
+//!   `dear_capture::RgbdFrame::rgb`.
 
 pub mod colour;
 pub mod depth;
