@@ -5,7 +5,7 @@ capture.json + frames/NNNNNN.{rgb,depth,gt,mask}.png), runs OpenCV contrib filte
 ToF depth guided by the RGB image, and prints the depth MAE (cm) per input-error class
 (low / mid / high / all) in the format of `dear eval`'s table, with the project's definition
 (`DepthErrorSplit` of train/dear_train/metrics.py, numpy only, which mirrors
-pipeline/src/metrics.rs):
+evaluate/src/metrics.rs):
 
 - evaluated pixels: ground truth in (0, 4 m] and inside the ground-truth mask, and a valid
   (> 0) input depth;

@@ -16,11 +16,11 @@ would build. Per frame:
    threshold) on the points within twice it. Too few inliers: the capture's static calibration.
 
 The fitted calibration is then scored exactly as `dear eval` scores a calibration method
-(pipeline/src/evaluate/methods.rs): the ToF depth is splatted to the RGB grid through it
+(evaluate/src/methods.rs): the ToF depth is splatted to the RGB grid through it
 (`StaticAligner::align_into`, pipeline/src/align.rs and geometry/splat.rs, reproduced here in
 float32 with the same summation order), the flow is `W(aligned depth)` (the flow of the median
 valid depth where nothing landed), and the AEPE is `dear_train.metrics.aepe` (the mirror of
-pipeline/src/metrics.rs) against the ground-truth flow (`.flo`, else the frame's perturbation at
+evaluate/src/metrics.rs) against the ground-truth flow (`.flo`, else the frame's perturbation at
 the ground-truth depth) over the ground-truth mask, averaged over frames.
 
 Checks (run both before trusting a figure):

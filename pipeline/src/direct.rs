@@ -1,6 +1,6 @@
 //! Direct alignment: fit the four calibration numbers `(t_x, t_y, c_x, c_y)` against every edge
 //! pixel of the frame at once, instead of matching patches first and fitting a line to the
-//! matches afterwards (the edge-matching baseline of `dear eval`, `evaluate::edge_matching`).
+//! matches afterwards (the edge-matching baseline of `dear eval`, `dear_eval::edge_matching`).
 //!
 //! # Why
 //!

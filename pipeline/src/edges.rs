@@ -1,12 +1,12 @@
 //! Edge maps of the RGB image and the ToF amplitude on one scale: what the direct calibration
 //! fit ([`direct`](crate::direct)) compares at run time, and the edge-matching baseline of the
-//! evaluation harness (`evaluate::edge_matching`) matches. Colour and near-infrared intensities
+//! evaluation (`dear_eval::edge_matching`) matches. Colour and near-infrared intensities
 //! differ, but object boundaries show in both, so both sides compare gradient magnitudes.
 
 use ndarray::{Array2, ArrayView2, ArrayView3};
 
 /// Luma (BT.601 weights) of an `(H, W, 3)` RGB image.
-pub(crate) fn rgb_to_gray(rgb: ArrayView3<u8>) -> Array2<f32> {
+pub fn rgb_to_gray(rgb: ArrayView3<u8>) -> Array2<f32> {
     let (h, w, _) = rgb.dim();
     Array2::from_shape_fn((h, w), |(y, x)| {
         0.299 * rgb[[y, x, 0]] as f32
@@ -17,7 +17,7 @@ pub(crate) fn rgb_to_gray(rgb: ArrayView3<u8>) -> Array2<f32> {
 
 /// Sobel gradient magnitude, normalised by its 99th percentile so both modalities are on one
 /// scale; borders are 0.
-pub(crate) fn gradient_magnitude(img: ArrayView2<f32>) -> Array2<f32> {
+pub fn gradient_magnitude(img: ArrayView2<f32>) -> Array2<f32> {
     let (h, w) = img.dim();
     let mut g = Array2::<f32>::zeros((h, w));
     for y in 1..h.saturating_sub(1) {
@@ -53,9 +53,11 @@ pub(crate) fn normalise_by_p99(g: &mut Array2<f32>, sample_stride: usize) {
     g.mapv_inplace(|v| (v / scale).min(1.0));
 }
 
-/// A scene with a known misalignment for the tests of the calibration fits.
-#[cfg(test)]
-pub(crate) mod test_scene {
+/// A scene with a known misalignment for the tests of the calibration fits (here and, with the
+/// feature `test-scene`, dear-eval's edge-matching baseline).
+#[cfg(any(test, feature = "test-scene"))]
+#[doc(hidden)]
+pub mod test_scene {
     use ndarray::{Array2, Array3};
 
     use crate::geometry::synthesize_view;
@@ -65,7 +67,7 @@ pub(crate) mod test_scene {
     /// view of the scene through `truth` (RGB pixel `p` sees ToF pixel `p + W(p)`). RGB and
     /// amplitude share the boundaries but not the interior pattern. Returns `(rgb, amplitude,
     /// depth)`, the last two on the ToF grid.
-    pub(crate) fn textured_scene(truth: &Calibration) -> (Array3<u8>, Array2<f32>, Array2<f32>) {
+    pub fn textured_scene(truth: &Calibration) -> (Array3<u8>, Array2<f32>, Array2<f32>) {
         let (h, w) = (160, 220);
         // Discs give edges in every direction (straight edges alone are ambiguous along
         // themselves and are rightly rejected).
@@ -122,6 +124,7 @@ pub(crate) mod test_scene {
 
     /// The direct fit of [`textured_scene`]`(truth)` from the identity, with the settings for
     /// real contours (a ToF contour moves with the nearer surface, depth edges added).
+    #[cfg(test)]
     pub(crate) fn fit_textured_scene(truth: &Calibration) -> crate::direct::DirectFit {
         let (rgb, amplitude, depth) = textured_scene(truth);
         let params = crate::direct::DirectFitParams {

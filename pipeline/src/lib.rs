@@ -7,9 +7,6 @@
 //! - [`edges`]: RGB and amplitude edge maps on one scale (what the direct fit compares);
 //! - [`direct`]: direct fit of the calibration to all edge pixels at once (edge correlation);
 //! - [`geometry`]: warping, least-squares calibration, depth↔flow, forward splatting;
-//! - [`metrics`]: AEPE and the paper's quantile-split depth MAE;
-//! - [`evaluate`]: methods (with the classical edge-matching baseline) and metric accumulation
-//!   behind `dear eval` (feature `evaluate`, not in the daemon's build);
 //! - [`filter`]: the classical edge-aware refinement baseline;
 //! - [`model`]: model bundles (ONNX graphs + manifest) run by tract (feature `inference`);
 //! - [`dear`]: the paper's per-frame chain of networks and geometry (feature `inference`);
@@ -18,6 +15,9 @@
 //!   (feature `inference`);
 //! - [`online`]: online re-estimation of the drifting calibration;
 //! - [`simd`]: the instruction sets the hot loops are compiled for, and which one runs.
+//!
+//! The evaluation behind `dear eval` (metrics, methods and baselines, reports) is the
+//! `dear-eval` crate, which depends on this one; the runtime does not.
 
 pub mod align;
 #[cfg(feature = "inference")]
@@ -26,11 +26,8 @@ pub mod direct;
 pub mod edges;
 #[cfg(feature = "inference")]
 pub mod engine;
-#[cfg(feature = "evaluate")]
-pub mod evaluate;
 pub mod filter;
 pub mod geometry;
-pub mod metrics;
 #[cfg(feature = "inference")]
 pub mod model;
 pub mod online;

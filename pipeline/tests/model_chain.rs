@@ -7,12 +7,12 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use dear_capture::{Calibration, Flow};
+use dear_eval::metrics;
 use dear_pipeline::align::StaticAligner;
 use dear_pipeline::dear::{
     CachedFusion, ChainError, ChainInput, ChainMode, ChainOptions, ChainOutput, DearChain,
 };
 use dear_pipeline::geometry::warp_depth;
-use dear_pipeline::metrics;
 use dear_pipeline::model::ModelBundle;
 use dear_pipeline::online::Evidence;
 use ndarray::{s, Array2, Array3, ArrayView2, Axis};

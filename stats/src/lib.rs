@@ -34,7 +34,7 @@
 //! - The amplitude normalisation's percentile (numpy's `linear`,
 //!   `dear_pipeline::dear::preprocess::percentile_linear`): part of the model bundle contract,
 //!   matched to the training code bit for bit.
-//! - The evaluation's error classes (`dear_pipeline::metrics`, `train/dear_train/metrics.py`):
+//! - The evaluation's error classes (`dear_eval::metrics`, `train/dear_train/metrics.py`):
 //!   the paper's protocol, shared with Python through `fixtures/metrics/`.
 
 #![forbid(unsafe_code)]

@@ -1,6 +1,6 @@
 """Evaluation of a checkpoint: flow end-point errors and the paper's depth-error protocol on
 dataset samples, with the metric definitions of :mod:`dear_train.metrics` (the mirror of
-``pipeline/src/metrics.rs``, so these are the quantities ``dear eval`` and RESULTS.md report).
+``evaluate/src/metrics.rs``, so these are the quantities ``dear eval`` and RESULTS.md report).
 
 ``dear-evaluate --checkpoint RUN/final.pt --data CAPTURE_DIR`` prints the metrics as JSON.
 """

@@ -1,8 +1,8 @@
 """The project's metrics in Python, numpy only (so scripts outside the training venv, such as
 ``scripts/opencv_baselines.py``, use the same definitions): the mirror of
-``pipeline/src/metrics.rs``, both checked against the hand-computed cases in
+``evaluate/src/metrics.rs``, both checked against the hand-computed cases in
 ``fixtures/metrics/`` (``train/tests/test_metrics_fixture.py``,
-``pipeline/tests/metrics_fixture.rs``).
+``evaluate/tests/metrics_fixture.rs``).
 
 Depth protocol (DEAR §5, Tables 2 and 3), **ranked per frame**:
 

@@ -1,6 +1,6 @@
 """The Python metrics against the hand-computed cases in ``fixtures/metrics/``.
 
-``pipeline/tests/metrics_fixture.rs`` checks ``pipeline/src/metrics.rs`` against the same files,
+``evaluate/tests/metrics_fixture.rs`` checks ``evaluate/src/metrics.rs`` against the same files,
 so both languages compute one definition (per-frame ranking, see
 :mod:`dear_train.evaluation`). The depth case is built so that ranking pooled over the set,
 other quarter boundaries, other tie-breaking or counting invalid outputs all fail it; the

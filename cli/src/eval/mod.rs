@@ -2,7 +2,7 @@
 //! pipeline (`dear-pipeline`, the code the daemon runs), not with the training code.
 //!
 //! Rows: the ToF input as delivered; with `--baselines`, the classical methods of
-//! [`dear_pipeline::evaluate::Method`]; per `--bundle`, the DEAR chain's aligned depth (before
+//! [`dear_eval::Method`]; per `--bundle`, the DEAR chain's aligned depth (before
 //! refinement), its output, and its refinement alone at the true calibration (the protocol of
 //! the paper's Tables 2 and 3). Columns: AEPE of the rough and the final flow, depth MAE in
 //! the paper's quantile split, coverage and time per frame.
@@ -24,12 +24,12 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context};
 use dear_capture::{CaptureDir, Sample};
-use dear_pipeline::engine::{typical_delay_frames, MeasurementSchedule};
-use dear_pipeline::evaluate::{
+use dear_eval::metrics::aepe;
+use dear_eval::{
     ground_truth_flow, ground_truth_mask, BundleMethod, Evaluation, Method, MethodOutput,
     MethodReport, MethodRunner, OnlineBundleMethod,
 };
-use dear_pipeline::metrics::aepe;
+use dear_pipeline::engine::{typical_delay_frames, MeasurementSchedule};
 use dear_pipeline::model::ModelBundle;
 use dear_pipeline::online::{HealthReport, OnlineConfig};
 use indicatif::{ProgressBar, ProgressStyle};

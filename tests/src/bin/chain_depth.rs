@@ -29,7 +29,7 @@ use std::time::Instant;
 use clap::{Parser, Subcommand};
 use dear_capture::is_valid_depth;
 use dear_capture::CaptureDir;
-use dear_pipeline::evaluate::BundleMethod;
+use dear_eval::BundleMethod;
 use dear_pipeline::model::ModelBundle;
 
 const MAGIC: &[u8; 8] = b"DEARDPT1";

@@ -3,16 +3,15 @@
 //! bundled sample's depth better than the ToF input, measured against the sample's ground
 //! truth with the same evaluation code as `dear eval`; on frames rendered aligned, the chain
 //! finds (almost) no misalignment.
-#![cfg(feature = "inference")]
 
 use std::path::{Path, PathBuf};
 
 use dear_capture::CaptureDir;
-use dear_pipeline::engine::{typical_delay_frames, MeasurementSchedule};
-use dear_pipeline::evaluate::{
+use dear_eval::{
     ground_truth_flow, ground_truth_mask, BundleMethod, Evaluation, Method, MethodRunner,
     OnlineBundleMethod,
 };
+use dear_pipeline::engine::{typical_delay_frames, MeasurementSchedule};
 use dear_pipeline::model::ModelBundle;
 use dear_pipeline::online::OnlineConfig;
 

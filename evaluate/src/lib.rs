@@ -1,15 +1,23 @@
-//! Evaluation of alignment and refinement methods on captures with ground truth: the engine
-//! behind `dear eval`. Each [`Method`] runs the same `dear-pipeline` code the daemon runs; the
-//! [`Evaluation`] accumulates the paper's metrics per method, with the time each method took,
-//! so accuracy and cost come from one run.
+//! `dear-eval`: the evaluation behind `dear eval`, and nothing the runtime needs. Its one job is
+//! to measure methods on captures with ground truth. Each [`Method`] runs the same
+//! `dear-pipeline` code the daemon runs; the [`Evaluation`] accumulates the paper's metrics
+//! ([`metrics`]) per method, with the time each method took, so accuracy and cost come from one
+//! run. `deard` does not depend on this crate (`scripts/test.sh` checks `cargo tree -p deard`).
+//!
+//! - [`metrics`]: AEPE and the paper's quantile-split depth MAE;
+//! - [`methods`]: the alignment and refinement methods, with the classical
+//!   [`edge_matching`] baseline;
+//! - [`bundle`]: a model bundle's chain, per frame or online through the daemon's engine;
+//! - [`report`]: metric accumulation and the per-method report.
 
-#[cfg(feature = "inference")]
+#![forbid(unsafe_code)]
+
 pub mod bundle;
 pub mod edge_matching;
 pub mod methods;
+pub mod metrics;
 pub mod report;
 
-#[cfg(feature = "inference")]
 pub use bundle::{BundleMethod, BundleOutputs, OnlineBundleMethod};
 pub use methods::{Method, MethodOutput, MethodRunner};
 pub use report::{Evaluation, MethodReport};
@@ -36,7 +44,7 @@ pub fn ground_truth_mask(sample: &Sample) -> Result<Array2<bool>, EvalError> {
     let gt = truth.depth.as_ref().ok_or(EvalError::NoGroundTruth {
         frame: sample.frame.index,
     })?;
-    let mut valid = gt.mapv(crate::geometry::is_valid_depth);
+    let mut valid = gt.mapv(dear_capture::is_valid_depth);
     if let Some(mask) = &truth.mask {
         Zip::from(&mut valid).and(mask).for_each(|v, &m| *v &= m);
     }

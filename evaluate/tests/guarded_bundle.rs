@@ -2,11 +2,9 @@
 //! clean input — bright, single-bounce scenes, the measurement already right — it does less
 //! harm than the shipped hybrid refiner, which "corrects" multi-path that is not there.
 
-#![cfg(feature = "inference")]
-
 use std::path::PathBuf;
 
-use dear_pipeline::evaluate::{ground_truth_mask, BundleMethod, Evaluation};
+use dear_eval::{ground_truth_mask, BundleMethod, Evaluation};
 use dear_pipeline::model::ModelBundle;
 use dear_synth::family::Family;
 use dear_synth::scene::Scene;
@@ -80,8 +78,8 @@ fn the_guarded_refiner_does_less_harm_to_clean_depth_and_says_how_wrong_it_expec
 }
 
 /// The measurement as a method's output (the "ToF input" row).
-fn raw(sample: &dear_capture::Sample) -> dear_pipeline::evaluate::MethodOutput {
-    dear_pipeline::evaluate::MethodOutput {
+fn raw(sample: &dear_capture::Sample) -> dear_eval::MethodOutput {
+    dear_eval::MethodOutput {
         depth: sample.frame.depth.clone(),
         flow: None,
         flow_rough: None,

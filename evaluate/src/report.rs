@@ -2,7 +2,7 @@
 
 use serde::Serialize;
 
-use super::methods::MethodOutput;
+use crate::methods::MethodOutput;
 use crate::metrics::{
     aepe, DepthErrorSplit, Reliability, ReliabilityBin, TemporalChange, CLASSES, MAX_EVAL_DEPTH_M,
 };

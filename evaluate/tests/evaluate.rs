@@ -3,9 +3,7 @@
 
 use dear_capture::{Calibration, RgbdFrame};
 use dear_capture::{GroundTruth, Sample};
-use dear_pipeline::evaluate::{
-    ground_truth_flow, ground_truth_mask, Evaluation, Method, MethodRunner,
-};
+use dear_eval::{ground_truth_flow, ground_truth_mask, Evaluation, Method, MethodRunner};
 use dear_pipeline::geometry::synthesize_view;
 use ndarray::{Array2, Array3};
 

@@ -4,13 +4,13 @@ use std::time::Instant;
 
 use ndarray::Array2;
 
-use super::edge_matching::{estimate_calibration_or, EdgeMatchParams};
-use crate::align::StaticAligner;
-use crate::direct::{estimate_calibration_direct, DirectFitParams};
-use crate::filter::ClassicalRefiner;
+use crate::edge_matching::{estimate_calibration_or, EdgeMatchParams};
 use dear_capture::frame::Flow;
 use dear_capture::Calibration;
 use dear_capture::Sample;
+use dear_pipeline::align::StaticAligner;
+use dear_pipeline::direct::{estimate_calibration_direct, DirectFitParams};
+use dear_pipeline::filter::ClassicalRefiner;
 
 /// One row of the comparison.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -26,7 +26,7 @@ pub enum Method {
     /// Edge matching + the classical filter.
     EdgeMatchingClassical,
     /// Calibration fitted per frame directly to all edge pixels (edge-map correlation,
-    /// coarse-to-fine; [`crate::direct`]), the factory calibration when the fit is not confident.
+    /// coarse-to-fine; [`dear_pipeline::direct`]), the factory calibration when the fit is not confident.
     DirectFit,
     /// Direct fit + the classical filter.
     DirectFitClassical,

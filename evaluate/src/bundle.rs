@@ -13,15 +13,15 @@
 
 use ndarray::Array2;
 
-use super::methods::MethodOutput;
-use crate::dear::{ChainError, ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
-use crate::engine::{
-    CalibrationPolicy, EngineConfig, EngineError, FrameEngine, FrameReport, MeasurementSchedule,
-};
-use crate::model::{BundleError, ModelBundle};
-use crate::online::OnlineConfig;
+use crate::methods::MethodOutput;
 use dear_capture::Sample;
 use dear_capture::{Calibration, RgbdFrame};
+use dear_pipeline::dear::{ChainError, ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
+use dear_pipeline::engine::{
+    CalibrationPolicy, EngineConfig, EngineError, FrameEngine, FrameReport, MeasurementSchedule,
+};
+use dear_pipeline::model::{BundleError, ModelBundle};
+use dear_pipeline::online::OnlineConfig;
 
 /// The outputs of one chain run.
 #[derive(Debug, Clone)]

@@ -8,10 +8,11 @@
 //! stacking the frames into one), other quarter boundaries, other tie-breaking or counting an
 //! invalid output all give different figures.
 
+#[path = "../../pipeline/tests/common/mod.rs"]
 mod common;
 
 use dear_capture::Flow;
-use dear_pipeline::metrics::{
+use dear_eval::metrics::{
     aepe, DepthErrorSplit, Reliability, TemporalChange, CLASSES, MAX_EVAL_DEPTH_M,
     RELIABILITY_EDGES_CM, STATIC_TOLERANCE_M,
 };
@@ -54,7 +55,7 @@ fn close(got: f64, want: f64, what: &str) {
 }
 
 /// `(input, output, gt)` of each frame, the ground truth zeroed outside `valid` as
-/// `evaluate::report` does.
+/// `dear_eval::report` does.
 fn depth_frames(doc: &Value) -> Vec<(Array2<f32>, Array2<f32>, Array2<f32>)> {
     doc["inputs"]["frames"]
         .as_array()
@@ -183,7 +184,7 @@ fn aepe_matches_the_fixture() {
         }
         per_frame.extend(got);
     }
-    // A set's AEPE, as `evaluate::report` accumulates it: the mean over frames that have one.
+    // A set's AEPE, as `dear_eval::report` accumulates it: the mean over frames that have one.
     let mean = per_frame.iter().sum::<f64>() / per_frame.len() as f64;
     close(
         mean,
@@ -216,7 +217,7 @@ fn f32s_nonfinite(v: &Value) -> Array2<f32> {
     plane((shape, data))
 }
 
-/// `plane` with the ground truth zeroed outside `valid`, as `evaluate::report` passes it.
+/// `plane` with the ground truth zeroed outside `valid`, as `dear_eval::report` passes it.
 fn masked(gt: &Array2<f32>, valid: &Array2<bool>) -> Array2<f32> {
     Zip::from(gt)
         .and(valid)

@@ -16,13 +16,13 @@
 //! `train/dear_train/metrics.py` mirrors the four definitions in Python (the first two serve
 //! the training side: `dear-evaluate`, a run's validation, `model.json`'s `validation`); both
 //! are checked against the hand-computed cases in `fixtures/metrics/`
-//! (`pipeline/tests/metrics_fixture.rs`, `train/tests/test_metrics_fixture.py`). Change the two
+//! (`evaluate/tests/metrics_fixture.rs`, `train/tests/test_metrics_fixture.py`). Change the two
 //! together.
 
 use ndarray::{ArrayView2, Zip};
 
-use crate::geometry::is_valid_depth;
 use dear_capture::frame::Flow;
+use dear_capture::is_valid_depth;
 
 /// The paper's evaluation range: MAE is computed where the ground truth is within 4 m.
 pub const MAX_EVAL_DEPTH_M: f32 = 4.0;

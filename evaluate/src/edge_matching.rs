@@ -11,10 +11,10 @@
 
 use ndarray::{Array2, ArrayView2, ArrayView3};
 
-use crate::edges::{gradient_magnitude, rgb_to_gray};
-use crate::geometry::{solve_calibration_robust, CalibrationFit, LsqError, RobustOptions};
 use dear_capture::calibration::Calibration;
 use dear_capture::frame::Flow;
+use dear_pipeline::edges::{gradient_magnitude, rgb_to_gray};
+use dear_pipeline::geometry::{solve_calibration_robust, CalibrationFit, LsqError, RobustOptions};
 
 /// Settings of [`estimate_calibration`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -166,7 +166,7 @@ fn min_valid_depth(depth: ArrayView2<f32>, y: usize, x: usize, r: usize) -> f32 
     for yy in y.saturating_sub(r)..(y + r + 1).min(h) {
         for xx in x.saturating_sub(r)..(x + r + 1).min(w) {
             let d = depth[[yy, xx]];
-            if crate::geometry::is_valid_depth(d) {
+            if dear_capture::is_valid_depth(d) {
                 best = best.min(d);
             }
         }
@@ -273,7 +273,7 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::edges::test_scene::textured_scene;
+    use dear_pipeline::edges::test_scene::textured_scene;
     use ndarray::Array3;
 
     /// Boxes at three depths in front of a wall; RGB and amplitude share the boundaries but not
