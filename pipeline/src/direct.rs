@@ -113,7 +113,7 @@ pub struct DirectFitParams {
     /// from an aligned frame gained a median 0.003–0.006 of correlation by moving 0.1–0.5 px
     /// (1–3 px on bright single-bounce scenes), where a fit that corrects a misalignment of
     /// σ = 2–4 px gains a median 0.17–0.29. 0.03 left every aligned tuning frame where it was
-    /// and changed the misaligned sets' mean AEPE by at most 0.01 px (docs/alignment.md).
+    /// and changed the misaligned sets' mean AEPE by at most 0.01 px (docs/daemon.md, "Leaving a correct calibration alone").
     pub min_gain: f32,
     /// The fit may move the flow of the reference calibration by at most this much on average
     /// over the valid ToF pixels (px of the full-resolution image) to be used: in near-empty
@@ -236,7 +236,8 @@ pub fn estimate_calibration_direct_against(
 
     let initial_theta = Theta::from(start);
     let fine = &pyramid[finest];
-    let initial_correlation = correlation_at(fine, &Theta::from(reference)).unwrap_or(0.0);
+    let reference_theta = Theta::from(reference);
+    let initial_correlation = correlation_at(fine, &reference_theta).unwrap_or(0.0);
 
     // Is t observable? Edge-weighted spread of the inverse depth at the finest level.
     let fit_t = rel_inv_depth_spread(fine) >= params.min_rel_inv_depth_spread as f64;
@@ -261,8 +262,7 @@ pub fn estimate_calibration_direct_against(
     if !corr.is_finite()
         || corr < params.min_correlation
         || corr <= initial_correlation as f32 + params.min_gain
-        || mean_flow_change(fine, &theta, &Theta::from(reference))
-            > params.max_mean_flow_change_px as f64
+        || mean_flow_change(fine, &theta, &reference_theta) > params.max_mean_flow_change_px as f64
     {
         let mut f = fallback(initial_correlation as f32);
         f.baseline_fitted = false;

@@ -794,28 +794,31 @@ impl FrontEnd {
         // judged against the calibration in use.
         let direct = match (&options.direct_fit, &fit) {
             (Some(params), Ok(network)) => {
-                // Without a calibration in use there is nothing to protect: the fit only has
-                // to beat the network's start (the paper's protocol).
-                let unguarded = DirectFitParams {
-                    min_gain: 0.0,
-                    max_mean_flow_change_px: f32::INFINITY,
-                    ..*params
+                let (reference, params) = match self.reference {
+                    Some(reference) => (reference, *params),
+                    // Without a calibration in use there is nothing to protect: the fit only
+                    // has to beat the network's start (the paper's protocol).
+                    None => (
+                        network.calibration,
+                        DirectFitParams {
+                            min_gain: 0.0,
+                            max_mean_flow_change_px: f32::INFINITY,
+                            ..*params
+                        },
+                    ),
                 };
                 let direct = estimate_calibration_direct_against(
                     input.rgb,
                     input.amplitude,
                     input.depth,
                     network.calibration,
-                    self.reference.unwrap_or(network.calibration),
-                    if self.reference.is_some() {
-                        params
-                    } else {
-                        &unguarded
-                    },
+                    reference,
+                    &params,
                 );
-                Some(match self.reference {
-                    Some(_) if direct.fell_back => Some(Measurement::keeping_reference(&direct)),
-                    _ => Measurement::from_direct_fit(&direct),
+                Some(if direct.fell_back && self.reference.is_some() {
+                    Some(Measurement::keeping_reference(&direct))
+                } else {
+                    Measurement::from_direct_fit(&direct)
                 })
             }
             _ => None,
