@@ -78,28 +78,9 @@ impl Daemon {
     /// the log if the daemon exits first or `timeout` passes.
     #[track_caller]
     pub fn wait_for_log(&mut self, needle: &str, timeout: Duration) -> String {
-        let deadline = Instant::now() + timeout;
-        loop {
-            if let Some(line) = self.log_text().lines().find(|l| l.contains(needle)) {
-                return line.to_string();
-            }
-            if let Ok(Some(status)) = self.child.try_wait() {
-                // It may have logged the line as it exited.
-                if let Some(line) = self.log_text().lines().find(|l| l.contains(needle)) {
-                    return line.to_string();
-                }
-                panic!(
-                    "deard exited ({status}) before logging {needle:?}:\n{}",
-                    self.log_text()
-                );
-            }
-            assert!(
-                Instant::now() < deadline,
-                "deard did not log {needle:?} within {timeout:?}:\n{}",
-                self.log_text()
-            );
-            thread::sleep(POLL);
-        }
+        self.wait_for_logged(&format!("a line with {needle:?}"), timeout, |log| {
+            log.lines().find(|l| l.contains(needle)).map(str::to_string)
+        })
     }
 
     /// Waits for a log line whose counters ([`Counts`]: a statistics line, `source finished`,
@@ -113,24 +94,38 @@ impl Daemon {
         timeout: Duration,
         reached: impl Fn(&Counts) -> bool,
     ) -> Counts {
+        self.wait_for_logged(&format!("counters that show {what}"), timeout, |log| {
+            log.lines().filter_map(Counts::parse).find(|c| reached(c))
+        })
+    }
+
+    /// Polls the log until `find` finds something in it, and returns that; panics naming
+    /// `what` with the log if the daemon exits first (after one last look: it may have logged
+    /// it as it exited) or `timeout` passes.
+    #[track_caller]
+    fn wait_for_logged<T>(
+        &mut self,
+        what: &str,
+        timeout: Duration,
+        find: impl Fn(&str) -> Option<T>,
+    ) -> T {
         let deadline = Instant::now() + timeout;
-        let find = |log: &str| log.lines().filter_map(Counts::parse).find(|c| reached(c));
         loop {
-            if let Some(counts) = find(&self.log_text()) {
-                return counts;
+            if let Some(found) = find(&self.log_text()) {
+                return found;
             }
             if let Ok(Some(status)) = self.child.try_wait() {
-                if let Some(counts) = find(&self.log_text()) {
-                    return counts;
+                if let Some(found) = find(&self.log_text()) {
+                    return found;
                 }
                 panic!(
-                    "deard exited ({status}) before its counters showed {what}:\n{}",
+                    "deard exited ({status}) before logging {what}:\n{}",
                     self.log_text()
                 );
             }
             assert!(
                 Instant::now() < deadline,
-                "deard's counters did not show {what} within {timeout:?}:\n{}",
+                "deard did not log {what} within {timeout:?}:\n{}",
                 self.log_text()
             );
             thread::sleep(POLL);
