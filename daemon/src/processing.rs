@@ -227,7 +227,7 @@ impl Processor {
             Engine::Dear(engine) => {
                 let f = frame.borrow();
                 engine
-                    .prepare(chain_input(f))
+                    .prepare(ChainInput::from(f))
                     .map_err(|source| ProcessError::Chain {
                         frame: f.index,
                         source,
@@ -272,13 +272,13 @@ impl Processor {
             confidence: out.confidence.view_mut(),
         };
         let next_input = match &next {
-            Some(Ok(n)) => Some(chain_input(n.borrow())),
+            Some(Ok(n)) => Some(ChainInput::from(n.borrow())),
             _ => None,
         };
         let (finished, next_prepared) = engine.finish(
             frame.index,
             prepared,
-            chain_input(frame),
+            ChainInput::from(frame),
             output,
             next_input,
         );
@@ -371,7 +371,7 @@ impl Processor {
                     confidence: out.confidence.view_mut(),
                 };
                 let report = engine
-                    .process(frame.index, chain_input(frame), output)
+                    .process(frame.index, ChainInput::from(frame), output)
                     .map_err(|source| ProcessError::Chain {
                         frame: frame.index,
                         source,
@@ -423,15 +423,6 @@ pub struct Finished<F> {
     pub result: Result<(), ProcessError>,
     /// The next frame, prepared (or why it cannot be: skip and count it), when one was given.
     pub next: Option<Result<PreparedFrame<F>, ProcessError>>,
-}
-
-/// A frame's planes as the chain takes them.
-fn chain_input(frame: &RgbdFrame) -> ChainInput<'_> {
-    ChainInput {
-        rgb: frame.rgb.view(),
-        amplitude: frame.amplitude.view(),
-        depth: frame.depth.view(),
-    }
 }
 
 /// Fills `header` from the DEAR engine's `report` of a frame of the bundle `bundle_name`.

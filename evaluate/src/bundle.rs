@@ -77,11 +77,7 @@ impl BundleMethod {
 
     fn process(&mut self, frame: &RgbdFrame, mode: ChainMode) -> Result<ChainReport, ChainError> {
         self.chain.process(
-            ChainInput {
-                rgb: frame.rgb.view(),
-                amplitude: frame.amplitude.view(),
-                depth: frame.depth.view(),
-            },
+            ChainInput::from(frame),
             mode,
             ChainOutput {
                 depth: self.depth.view_mut(),
@@ -213,11 +209,7 @@ impl OnlineBundleMethod {
     /// # Errors
     /// As [`FrameEngine::process`].
     pub fn run(&mut self, frame: &RgbdFrame) -> Result<(MethodOutput, FrameReport), ChainError> {
-        let input = ChainInput {
-            rgb: frame.rgb.view(),
-            amplitude: frame.amplitude.view(),
-            depth: frame.depth.view(),
-        };
+        let input = ChainInput::from(frame);
         let output = ChainOutput {
             depth: self.depth.view_mut(),
             confidence: self.confidence.view_mut(),

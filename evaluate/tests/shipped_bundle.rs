@@ -250,11 +250,7 @@ fn overlapped_frames_publish_the_same_bits_as_one_by_one() {
         ChainMode::Cached(c)
     };
     let frames: Vec<_> = (0..4).map(|p| capture.read_frame(p).unwrap()).collect();
-    let input = |k: usize| ChainInput {
-        rgb: frames[k].rgb.view(),
-        amplitude: frames[k].amplitude.view(),
-        depth: frames[k].depth.view(),
-    };
+    let input = |k: usize| ChainInput::from(&frames[k]);
     let planes = || (Array2::<f32>::zeros((h, w)), Array2::<u8>::zeros((h, w)));
     let strip = |r: ChainReport| ChainReport {
         timings: Default::default(),
@@ -323,11 +319,7 @@ fn finishing_a_superseded_frame_is_refused() {
     let (w, h) = capture.size();
     let (w, h) = (w as usize, h as usize);
     let frame = capture.read_frame(0).unwrap();
-    let input = ChainInput {
-        rgb: frame.rgb.view(),
-        amplitude: frame.amplitude.view(),
-        depth: frame.depth.view(),
-    };
+    let input = ChainInput::from(&frame);
     let mode = ChainMode::Cached(capture.manifest().initial_calibration);
     let mut chain = DearChain::new(&bundle, w, h).unwrap();
     let first = chain.prepare(input, mode).unwrap();

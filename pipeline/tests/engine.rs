@@ -22,14 +22,6 @@ fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-fn input(frame: &RgbdFrame) -> ChainInput<'_> {
-    ChainInput {
-        rgb: frame.rgb.view(),
-        amplitude: frame.amplitude.view(),
-        depth: frame.depth.view(),
-    }
-}
-
 /// The sample's first `count` frames.
 fn frames(count: usize) -> Vec<RgbdFrame> {
     let capture = CaptureDir::open(root().join("samples/demo")).unwrap();
@@ -77,13 +69,17 @@ fn run(bundle: &ModelBundle, frames: &[RgbdFrame], delay: u32) -> Vec<Step> {
     frames
         .iter()
         .map(|frame| {
-            let prepared = engine.prepare(input(frame)).unwrap().expect("overlapped");
+            let prepared = engine
+                .prepare(ChainInput::from(frame))
+                .unwrap()
+                .expect("overlapped");
             let aligned_with = prepared.calibration();
             let output = ChainOutput {
                 depth: depth.view_mut(),
                 confidence: confidence.view_mut(),
             };
-            let (report, next) = engine.finish(frame.index, prepared, input(frame), output, None);
+            let (report, next) =
+                engine.finish(frame.index, prepared, ChainInput::from(frame), output, None);
             assert!(next.is_none());
             Step {
                 report: report.unwrap(),
@@ -121,7 +117,10 @@ fn a_delayed_measurement_of_frame_k_is_applied_at_frame_k_plus_n() {
     let (h, w) = frames[0].dim();
     let mut chain = DearChain::new(&bundle, w, h).unwrap();
     chain.set_reference(Some(start));
-    let of_frame_0 = chain.measure(input(&frames[0])).unwrap().measurement;
+    let of_frame_0 = chain
+        .measure(ChainInput::from(&frames[0]))
+        .unwrap()
+        .measurement;
     assert_eq!(steps[n].report.delivered.as_ref(), Some(&of_frame_0));
     assert!(of_frame_0.is_ok(), "the sample's first frame is measurable");
 
@@ -182,13 +181,21 @@ fn the_chain_keeps_a_correct_calibration_in_use_and_replaces_a_wrong_one() {
     let mut chain = DearChain::new(&bundle, w, h).unwrap();
 
     chain.set_reference(Some(truth));
-    let kept = chain.measure(input(frame)).unwrap().measurement.unwrap();
+    let kept = chain
+        .measure(ChainInput::from(frame))
+        .unwrap()
+        .measurement
+        .unwrap();
     assert_eq!(kept.calibration, truth);
     assert_eq!(kept.information, Some(Information::ZERO));
 
     let wrong = misaligned_start();
     chain.set_reference(Some(wrong));
-    let moved = chain.measure(input(frame)).unwrap().measurement.unwrap();
+    let moved = chain
+        .measure(ChainInput::from(frame))
+        .unwrap()
+        .measurement
+        .unwrap();
     // The principal point decides the flow at every depth here: 3 px off before.
     assert!(
         (moved.calibration.cx - truth.cx).abs() < 1.0,

@@ -35,11 +35,7 @@ fn run(chain: &mut DearChain, frame: &RgbdFrame, mode: ChainMode) -> Published {
     let mut confidence = Array2::from_elem((h, w), 77u8);
     let report = chain
         .process(
-            ChainInput {
-                rgb: frame.rgb.view(),
-                amplitude: frame.amplitude.view(),
-                depth: frame.depth.view(),
-            },
+            ChainInput::from(frame),
             mode,
             ChainOutput {
                 depth: depth.view_mut(),

@@ -31,7 +31,7 @@ use crate::model::{BundleError, BundleRunner, ModelBundle, Normalisation, Runner
 use crate::online::residual::{EdgeAlignment, EdgeCheck};
 use crate::online::Measurement;
 use dear_capture::calibration::Calibration;
-use dear_capture::frame::Flow;
+use dear_capture::frame::{Flow, RgbdFrame};
 
 /// How one frame is aligned.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -123,6 +123,17 @@ pub struct ChainInput<'a> {
     pub amplitude: ArrayView2<'a, f32>,
     /// ToF depth `(H, W)`, metres, `0` = invalid, as delivered (weakly calibrated).
     pub depth: ArrayView2<'a, f32>,
+}
+
+impl<'a> From<&'a RgbdFrame> for ChainInput<'a> {
+    /// A frame's planes as the chain takes them.
+    fn from(frame: &'a RgbdFrame) -> Self {
+        ChainInput {
+            rgb: frame.rgb.view(),
+            amplitude: frame.amplitude.view(),
+            depth: frame.depth.view(),
+        }
+    }
 }
 
 impl ChainInput<'_> {
