@@ -76,6 +76,35 @@ if $aarch64; then
     fi
 fi
 
+# PyPI's torch wheel for Linux x86_64 needs its CUDA libraries (nvidia-*-cu12 packages, about
+# 6.8 GB installed) even to run on the CPU. Installed one package at a time and without pip's
+# cache, the disk holds at most the installed set plus one wheel; all at once, pip first keeps
+# every downloaded wheel (about 4 GB more) beside it, which is how a machine with 7 GB free ran
+# out of space.
+install_torch_from_pypi() {
+    local torch=$1 need_gb=8 free_gb report requirement
+    free_gb=$(df -P --block-size=1G .venv | awk 'NR == 2 { print $4 }')
+    if [ "$free_gb" -lt "$need_gb" ]; then
+        echo "setup: $torch from PyPI needs about $need_gb GB free on the file system of" \
+             "$PWD/.venv; it has $free_gb GB. Free some space, or make" \
+             "download.pytorch.org/whl/cpu reachable (the CPU build is about 0.7 GB)." >&2
+        exit 1
+    fi
+    # pip resolves the whole set once from the index's metadata (no wheel is downloaded for a
+    # dry run), then each resolved package is installed alone, exactly as resolved.
+    report=.venv/.dear-torch-resolution.json
+    .venv/bin/pip install --quiet --no-cache-dir --dry-run --ignore-installed \
+        --report "$report" "$torch"
+    .venv/bin/python -c '
+import json, sys
+for item in json.load(open(sys.argv[1]))["install"]:
+    print(item["metadata"]["name"] + "==" + item["metadata"]["version"])
+' "$report" > .venv/.dear-torch-requirements
+    while read -r requirement; do
+        .venv/bin/pip install --quiet --no-cache-dir --no-deps "$requirement"
+    done < .venv/.dear-torch-requirements
+}
+
 # Python environment for train/ (re-installed only when train/pyproject.toml changes).
 if ! $rust_only && [ -d train ]; then
     stamp=.venv/.dear-train-installed
@@ -94,7 +123,8 @@ if ! $rust_only && [ -d train ]; then
             echo "setup: $torch, CPU build"
         else
             echo "setup: download.pytorch.org/whl/cpu cannot be reached: $torch from PyPI" \
-                 "(its default wheel brings the CUDA libraries, about 6.8 GB)"
+                 "(its default wheel brings the CUDA libraries, about 6.8 GB installed)"
+            install_torch_from_pypi "$torch"
         fi
         .venv/bin/pip install --quiet -e 'train[dev]'
         echo "$want" > "$stamp"
