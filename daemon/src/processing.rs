@@ -21,7 +21,7 @@ use dear_pipeline::engine::{
 };
 use dear_pipeline::filter::ClassicalRefiner;
 use dear_pipeline::model::{BundleError, ModelBundle};
-use dear_pipeline::online::OnlineConfig;
+use dear_pipeline::recalibration::OnlineConfig;
 use dear_proto::{flags, CalibrationHealth, FrameHeader, Stage};
 use ndarray::{Array2, ArrayViewMut2, ArrayViewMut3};
 

@@ -21,7 +21,7 @@ use dear_pipeline::engine::{
     CalibrationPolicy, EngineConfig, EngineError, FrameEngine, FrameReport, MeasurementSchedule,
 };
 use dear_pipeline::model::{BundleError, ModelBundle};
-use dear_pipeline::online::OnlineConfig;
+use dear_pipeline::recalibration::OnlineConfig;
 
 /// The outputs of one chain run.
 #[derive(Debug, Clone)]

@@ -13,8 +13,10 @@ use ndarray::{Array2, ArrayView2, ArrayView3};
 
 use dear_capture::calibration::Calibration;
 use dear_capture::frame::Flow;
-use dear_pipeline::edges::{gradient_magnitude, rgb_to_gray};
-use dear_pipeline::geometry::{solve_calibration_robust, CalibrationFit, LsqError, RobustOptions};
+use dear_pipeline::recalibration::edges::{gradient_magnitude, rgb_to_gray};
+use dear_pipeline::recalibration::{
+    solve_calibration_robust, CalibrationFit, LsqError, RobustOptions,
+};
 
 /// Settings of [`estimate_calibration`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -273,7 +275,7 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use dear_pipeline::edges::test_scene::textured_scene;
+    use dear_pipeline::recalibration::edges::test_scene::textured_scene;
     use ndarray::Array3;
 
     /// Boxes at three depths in front of a wall; RGB and amplitude share the boundaries but not

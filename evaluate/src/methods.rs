@@ -9,8 +9,8 @@ use dear_capture::frame::Flow;
 use dear_capture::Calibration;
 use dear_capture::Sample;
 use dear_pipeline::align::StaticAligner;
-use dear_pipeline::direct::{estimate_calibration_direct, DirectFitParams};
 use dear_pipeline::filter::ClassicalRefiner;
+use dear_pipeline::recalibration::direct::{estimate_calibration_direct, DirectFitParams};
 
 /// One row of the comparison.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -26,7 +26,8 @@ pub enum Method {
     /// Edge matching + the classical filter.
     EdgeMatchingClassical,
     /// Calibration fitted per frame directly to all edge pixels (edge-map correlation,
-    /// coarse-to-fine; [`dear_pipeline::direct`]), the factory calibration when the fit is not confident.
+    /// coarse-to-fine; [`dear_pipeline::recalibration::direct`]), the factory calibration when
+    /// the fit is not confident.
     DirectFit,
     /// Direct fit + the classical filter.
     DirectFitClassical,

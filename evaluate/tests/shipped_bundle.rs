@@ -13,7 +13,7 @@ use dear_eval::{
 };
 use dear_pipeline::engine::{typical_delay_frames, MeasurementSchedule};
 use dear_pipeline::model::ModelBundle;
-use dear_pipeline::online::OnlineConfig;
+use dear_pipeline::recalibration::OnlineConfig;
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")

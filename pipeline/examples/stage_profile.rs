@@ -29,13 +29,13 @@ use dear_capture::CaptureDir;
 use dear_pipeline::align::StaticAligner;
 use dear_pipeline::dear::confidence::confidence_into;
 use dear_pipeline::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
-use dear_pipeline::direct::{estimate_calibration_direct, DirectFitParams};
 use dear_pipeline::filter::ClassicalRefiner;
-use dear_pipeline::geometry::RobustOptions;
 use dear_pipeline::geometry::{warp_depth, warp_depth_and_bilinear};
 use dear_pipeline::model::{BundleRunner, ModelBundle, RunnerOptions};
-use dear_pipeline::online::residual::EdgeCheck;
-use dear_pipeline::online::Measurement;
+use dear_pipeline::recalibration::direct::{estimate_calibration_direct, DirectFitParams};
+use dear_pipeline::recalibration::residual::EdgeCheck;
+use dear_pipeline::recalibration::Measurement;
+use dear_pipeline::recalibration::RobustOptions;
 use ndarray::Array2;
 
 #[global_allocator]

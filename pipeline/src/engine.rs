@@ -41,9 +41,9 @@ use crate::dear::{
     BackgroundCalibrator, ChainError, ChainInput, ChainMode, ChainOutput, ChainReport, DearChain,
     DelayedCalibrator, Delivered, MeasureReport, Prepared, RefinementCheck, Submit,
 };
-use crate::geometry::LsqError;
 use crate::model::{BundleError, ModelBundle};
-use crate::online::{Measurement, NetworkTicket, OnlineCalibrator, OnlineConfig};
+use crate::recalibration::LsqError;
+use crate::recalibration::{Measurement, NetworkTicket, OnlineCalibrator, OnlineConfig};
 use dear_capture::calibration::Calibration;
 
 /// The worker thread's name (`top -H`, debuggers): the daemon is the engine's one user of it.

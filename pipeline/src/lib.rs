@@ -4,16 +4,16 @@
 //! [`dear_capture::Calibration`] (the weak-calibration flow model `W = t / z + c`).
 //!
 //! - [`align`]: aligning ToF depth to RGB with a known calibration;
-//! - [`edges`]: RGB and amplitude edge maps on one scale (what the direct fit compares);
-//! - [`direct`]: direct fit of the calibration to all edge pixels at once (edge correlation);
-//! - [`geometry`]: warping, least-squares calibration, depth↔flow, forward splatting;
+//! - [`geometry`]: warping, depth↔flow, forward splatting, registration of a live ToF image;
+//! - [`recalibration`]: estimating the weak calibration from the frames — the least-squares
+//!   fit of a flow, the edge maps and the direct fit to them, and online re-estimation of the
+//!   drifting calibration (estimator, observability and health, the per-frame edge check);
 //! - [`filter`]: the classical edge-aware refinement baseline;
 //! - [`model`]: model bundles (ONNX graphs + manifest) run by tract (feature `inference`);
 //! - [`dear`]: the paper's per-frame chain of networks and geometry (feature `inference`);
 //! - [`engine`]: the per-frame engine deard runs with a bundle (chain, online estimator,
 //!   measurement off the frame path, output guard) and `dear eval --online` evaluates
 //!   (feature `inference`);
-//! - [`online`]: online re-estimation of the drifting calibration;
 //! - [`simd`]: the instruction sets the hot loops are compiled for, and which one runs.
 //!
 //! The evaluation behind `dear eval` (metrics, methods and baselines, reports) is the
@@ -22,14 +22,12 @@
 pub mod align;
 #[cfg(feature = "inference")]
 pub mod dear;
-pub mod direct;
-pub mod edges;
 #[cfg(feature = "inference")]
 pub mod engine;
 pub mod filter;
 pub mod geometry;
 #[cfg(feature = "inference")]
 pub mod model;
-pub mod online;
+pub mod recalibration;
 pub mod simd;
 mod vector_math;

@@ -9,7 +9,7 @@ use dear_capture::Calibration;
 use dear_capture::CaptureDir;
 use dear_pipeline::align::StaticAligner;
 use dear_pipeline::geometry::{warp_bilinear, warp_depth};
-use dear_pipeline::online::EdgeCheck;
+use dear_pipeline::recalibration::EdgeCheck;
 use ndarray::Array2;
 
 fn demo() -> CaptureDir {

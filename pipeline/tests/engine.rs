@@ -14,8 +14,8 @@ use dear_pipeline::engine::{
     CalibrationPolicy, EngineConfig, FrameEngine, FrameReport, MeasurementSchedule,
 };
 use dear_pipeline::model::ModelBundle;
-use dear_pipeline::online::observability::Information;
-use dear_pipeline::online::OnlineConfig;
+use dear_pipeline::recalibration::observability::Information;
+use dear_pipeline::recalibration::OnlineConfig;
 use ndarray::Array2;
 
 fn root() -> PathBuf {

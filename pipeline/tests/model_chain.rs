@@ -14,7 +14,7 @@ use dear_pipeline::dear::{
 };
 use dear_pipeline::geometry::warp_depth;
 use dear_pipeline::model::ModelBundle;
-use dear_pipeline::online::Evidence;
+use dear_pipeline::recalibration::Evidence;
 use ndarray::{s, Array2, Array3, ArrayView2, Axis};
 
 fn root() -> PathBuf {

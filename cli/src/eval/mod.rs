@@ -31,7 +31,7 @@ use dear_eval::{
 };
 use dear_pipeline::engine::{typical_delay_frames, MeasurementSchedule};
 use dear_pipeline::model::ModelBundle;
-use dear_pipeline::online::{HealthReport, OnlineConfig};
+use dear_pipeline::recalibration::{HealthReport, OnlineConfig};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 

@@ -4,7 +4,7 @@
 //!
 //! `Full` mode is the paper: every frame runs the rough-flow network and re-solves the
 //! calibration — and then, by default ([`ChainOptions::direct_fit`]), refines that calibration
-//! by fitting it directly to the frame's RGB and amplitude edges ([`crate::direct`]). The
+//! by fitting it directly to the frame's RGB and amplitude edges ([`crate::recalibration::direct`]). The
 //! networks' flow is a few pixels off on scenes unlike their training set, the direct fit a
 //! fraction of a pixel when the edges agree (`dear eval`: AEPE at σ = 4 px 4.13 px for the
 //! network chain, 2.07 px for the direct fit from the factory calibration), so when the direct
@@ -24,12 +24,12 @@ use crate::align::StaticAligner;
 use crate::dear::confidence::{confidence_into, expected_error_confidence_into};
 use crate::dear::output_guard::{OutputGuard, RefinementCheck};
 use crate::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
-use crate::direct::{estimate_calibration_direct_against, DirectFitParams};
 use crate::filter::ClassicalRefiner;
-use crate::geometry::{warp_depth, warp_depth_and_bilinear, LsqError, RobustOptions};
+use crate::geometry::{warp_depth, warp_depth_and_bilinear};
 use crate::model::{BundleError, BundleRunner, ModelBundle, Normalisation, RunnerOptions};
-use crate::online::residual::{EdgeAlignment, EdgeCheck};
-use crate::online::Measurement;
+use crate::recalibration::direct::{estimate_calibration_direct_against, DirectFitParams};
+use crate::recalibration::residual::{EdgeAlignment, EdgeCheck};
+use crate::recalibration::{LsqError, Measurement, RobustOptions};
 use dear_capture::calibration::Calibration;
 use dear_capture::frame::{Flow, RgbdFrame};
 
@@ -42,7 +42,7 @@ pub enum ChainMode {
     Cached(Calibration),
 }
 
-impl crate::online::FrameDecision {
+impl crate::recalibration::FrameDecision {
     /// The chain mode this decision calls for: `Cached` with the current estimate when the
     /// network does not run, `Full` otherwise (also before any estimate exists).
     pub fn chain_mode(&self) -> ChainMode {
@@ -77,7 +77,7 @@ pub struct ChainOptions {
     /// reported inlier fraction.
     pub inlier_threshold_px: f32,
     /// `Full` mode: refine the network's calibration by the direct fit to the frame's edges
-    /// ([`crate::direct`]); when it is confident, the frame is aligned by its calibration like
+    /// ([`crate::recalibration::direct`]); when it is confident, the frame is aligned by its calibration like
     /// a `Cached` frame. `None` runs the paper's chain as trained (rough flow, least squares,
     /// fusion).
     pub direct_fit: Option<DirectFitParams>,

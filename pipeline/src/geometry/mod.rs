@@ -10,23 +10,21 @@
 //!
 //! Modules:
 //! - [`warp`]: backward warping of depth (discontinuity-aware), amplitude and RGB;
-//! - [`lsq`]: the paper's per-axis least squares for `(t, c)`, plain and robust (IRLS/Huber);
 //! - [`flow`]: depth → flow through a [`Calibration`](dear_capture::Calibration);
 //! - [`splat`]: forward splatting with a z-buffer, to synthesise a perturbed RGB view;
 //! - [`register`]: a live ToF image onto the RGB grid with the module's factory rotation and
-//!   intrinsics (the translation is left to the chain's calibration);
+//!   intrinsics (the translation is left to the chain's calibration).
+//!
+//! Fitting the calibration `(t, c)` to a flow or to a frame's edges is
+//! [`recalibration`](crate::recalibration)'s.
 
 pub mod flow;
-pub mod lsq;
 pub mod register;
 pub mod splat;
 pub mod surface;
 pub mod warp;
 
 pub use flow::{flow_from_depth, flow_from_depth_into};
-pub use lsq::{
-    solve_calibration, solve_calibration_robust, CalibrationFit, LsqError, RobustOptions,
-};
 pub use splat::{
     splat_depth_into, splat_depth_with, synthesize_view, SplatScratch, SynthesizedView,
 };

@@ -12,11 +12,11 @@ use serde_json::{json, Map, Value};
 
 use dear_capture::Calibration;
 use dear_capture::Flow;
-use dear_pipeline::geometry::lsq::{
-    solve_calibration, solve_calibration_robust, CalibrationFit, RobustOptions,
-};
 use dear_pipeline::geometry::surface::{DEPTH_EDGE_ABS_M, DEPTH_EDGE_REL};
 use dear_pipeline::geometry::{flow_from_depth, splat, synthesize_view, warp_bilinear, warp_depth};
+use dear_pipeline::recalibration::lsq::{
+    solve_calibration, solve_calibration_robust, CalibrationFit, RobustOptions,
+};
 
 /// Height and width of every case.
 pub const H: usize = 12;

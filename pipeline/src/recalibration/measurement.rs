@@ -1,14 +1,14 @@
 //! One calibration measurement: a fit of `(t, c)` on one frame, with the numbers the online
 //! filter needs to judge it. Two kinds of fit produce one: the robust least squares of a
 //! network flow (how much of the flow it explains, and how well), and the direct fit to the
-//! frame's edges ([`crate::direct`]; how well the RGB and amplitude edges then correlate).
+//! frame's edges ([`crate::recalibration::direct`]; how well the RGB and amplitude edges then correlate).
 
 use ndarray::{ArrayView2, Zip};
 
-use crate::direct::DirectFit;
 use crate::geometry::surface::is_valid_depth;
-use crate::geometry::{solve_calibration_robust, LsqError, RobustOptions};
-use crate::online::observability::{Information, Observability, FLOW_PIXELS_PER_SAMPLE};
+use crate::recalibration::direct::DirectFit;
+use crate::recalibration::observability::{Information, Observability, FLOW_PIXELS_PER_SAMPLE};
+use crate::recalibration::{solve_calibration_robust, LsqError, RobustOptions};
 use dear_capture::calibration::Calibration;
 use dear_capture::frame::Flow;
 
@@ -20,7 +20,7 @@ pub struct Measurement {
     /// What the fit rests on, and how well it fits.
     pub evidence: Evidence,
     /// How well the frame constrains each direction of `(t, c)`
-    /// ([`crate::online::observability`]); `None` when unknown, which the estimator treats as
+    /// ([`crate::recalibration::observability`]); `None` when unknown, which the estimator treats as
     /// constraining every direction.
     pub information: Option<Information>,
 }
@@ -134,7 +134,7 @@ impl Measurement {
     }
 
     /// A direct fit that did not beat the calibration in use
-    /// ([`crate::direct::estimate_calibration_direct_against`] fell back to its reference):
+    /// ([`crate::recalibration::direct::estimate_calibration_direct_against`] fell back to its reference):
     /// that calibration, constraining nothing (zero information), so that the online estimator
     /// leaves its estimate where it is.
     pub fn keeping_reference(fit: &DirectFit) -> Measurement {

@@ -5,7 +5,7 @@
 //! Per frame the caller asks [`OnlineCalibrator::begin_frame`] what to do, processes the frame
 //! (`Full` when told to run the network, otherwise `Cached` with the current estimate), then
 //! reports with [`OnlineCalibrator::end_frame`] the network frame's [`Measurement`] (if any)
-//! and the frame's edge alignment check (if any; see [`crate::online::residual`]).
+//! and the frame's edge alignment check (if any; see [`crate::recalibration::residual`]).
 //!
 //! Filtering, in order:
 //! 1. *Admission*: a flow fit that failed, used fewer than `min_pixels`, explains less than
@@ -17,7 +17,7 @@
 //!    with each other, the calibration really jumped (an OIS step, a knock): they replace the
 //!    history. One wild frame is therefore never enough.
 //! 3. *Observability* (issue 32): a measurement that says how well its frame constrains each
-//!    direction of `(t, c)` ([`Measurement::information`], [`crate::online::observability`])
+//!    direction of `(t, c)` ([`Measurement::information`], [`crate::recalibration::observability`])
 //!    moves the estimate only along the directions it knows to `max_direction_std_px`: it is
 //!    replaced by `e + P (m − e)`, `e` the estimate and `P` the projector onto those
 //!    eigenvectors of its information, before the gate and the median see it. A measurement
@@ -64,10 +64,10 @@ use std::collections::VecDeque;
 
 use dear_proto::CalibrationHealth;
 
-use crate::geometry::LsqError;
-use crate::online::measurement::{Evidence, Measurement};
-use crate::online::observability::{Information, Observability};
-use crate::online::residual::EdgeAlignment;
+use crate::recalibration::measurement::{Evidence, Measurement};
+use crate::recalibration::observability::{Information, Observability};
+use crate::recalibration::residual::EdgeAlignment;
+use crate::recalibration::LsqError;
 use dear_capture::calibration::Calibration;
 
 /// Settings of [`OnlineCalibrator`].
@@ -704,7 +704,7 @@ impl OnlineCalibrator {
     /// per-parameter median of the last three accepted (projected) measurements — what the
     /// recent evidence says, robust to one wild measurement as the estimate is, and ahead of
     /// the estimate (the median of the whole window) when the calibration moves — and the
-    /// last frame's edge shift ([`crate::online::EdgeShift`], when its peak is clear: NCC ≥
+    /// last frame's edge shift ([`crate::recalibration::EdgeShift`], when its peak is clear: NCC ≥
     /// `track_min_ncc`): how far that frame's own edges say its alignment is off in `c`.
     pub fn health(&self) -> HealthReport {
         let info = self.information();
@@ -1159,7 +1159,7 @@ mod tests {
     fn shifted(du: f32, dv: f32, peak_ncc: f32) -> Option<EdgeAlignment> {
         Some(EdgeAlignment {
             disagreement: 0.5,
-            shift: Some(crate::online::residual::EdgeShift {
+            shift: Some(crate::recalibration::residual::EdgeShift {
                 du,
                 dv,
                 peak_ncc,

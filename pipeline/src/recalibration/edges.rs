@@ -1,5 +1,5 @@
 //! Edge maps of the RGB image and the ToF amplitude on one scale: what the direct calibration
-//! fit ([`direct`](crate::direct)) compares at run time, and the edge-matching baseline of the
+//! fit ([`direct`](super::direct)) compares at run time, and the edge-matching baseline of the
 //! evaluation (`dear_eval::edge_matching`) matches. Colour and near-infrared intensities
 //! differ, but object boundaries show in both, so both sides compare gradient magnitudes.
 
@@ -125,14 +125,16 @@ pub mod test_scene {
     /// The direct fit of [`textured_scene`]`(truth)` from the identity, with the settings for
     /// real contours (a ToF contour moves with the nearer surface, depth edges added).
     #[cfg(test)]
-    pub(crate) fn fit_textured_scene(truth: &Calibration) -> crate::direct::DirectFit {
+    pub(crate) fn fit_textured_scene(
+        truth: &Calibration,
+    ) -> crate::recalibration::direct::DirectFit {
         let (rgb, amplitude, depth) = textured_scene(truth);
-        let params = crate::direct::DirectFitParams {
+        let params = crate::recalibration::direct::DirectFitParams {
             contour_radius: 5,
             depth_edge_weight: 1.0,
-            ..crate::direct::DirectFitParams::default()
+            ..crate::recalibration::direct::DirectFitParams::default()
         };
-        crate::direct::estimate_calibration_direct(
+        crate::recalibration::direct::estimate_calibration_direct(
             rgb.view(),
             amplitude.view(),
             depth.view(),

@@ -58,9 +58,9 @@
 
 use ndarray::{Array2, ArrayView2, ArrayView3};
 
-use crate::edges::{gradient_magnitude, normalise_by_p99, rgb_to_gray};
 use crate::geometry::surface::is_valid_depth;
-use crate::online::observability::{Information, EDGE_PIXELS_PER_SAMPLE};
+use crate::recalibration::edges::{gradient_magnitude, normalise_by_p99, rgb_to_gray};
+use crate::recalibration::observability::{Information, EDGE_PIXELS_PER_SAMPLE};
 use dear_capture::calibration::Calibration;
 
 /// Settings of [`estimate_calibration_direct`].
@@ -161,7 +161,7 @@ pub struct DirectFit {
     /// Whether `t` was fitted (false: held at its initial value, too little depth spread).
     pub baseline_fitted: bool,
     /// How well the frame's edges constrain each direction of `(t, c)` at the returned
-    /// calibration ([`crate::online::observability`]): the Gauss–Newton normal matrix at the
+    /// calibration ([`crate::recalibration::observability`]): the Gauss–Newton normal matrix at the
     /// finest level, `(α, β)` eliminated (Schur complement), over the residual variance and
     /// [`EDGE_PIXELS_PER_SAMPLE`]. When `t` was held, only the flow at the edges' mean inverse
     /// depth `ā` was fitted: the information is that of `t·ā + c` alone (rank 2). Zero when the
@@ -1230,7 +1230,7 @@ fn gauss_newton(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::edges::test_scene::{fit_textured_scene, textured_scene};
+    use crate::recalibration::edges::test_scene::{fit_textured_scene, textured_scene};
 
     fn max_flow_error(c: Calibration, truth: Calibration, depths: &[f32]) -> f32 {
         depths

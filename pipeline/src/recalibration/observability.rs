@@ -17,7 +17,7 @@
 //! flow are not independent, and a least squares that counts every pixel overstates its
 //! information by roughly the area over which its residuals are correlated. Each fit divides by
 //! such an area ([`EDGE_PIXELS_PER_SAMPLE`], [`FLOW_PIXELS_PER_SAMPLE`]); the thresholds that
-//! read the result ([`crate::online::OnlineConfig::max_direction_std_px`]) were set with these
+//! read the result ([`crate::recalibration::OnlineConfig::max_direction_std_px`]) were set with these
 //! values on the simulator's families, so the two go together.
 
 use dear_capture::calibration::Calibration;
@@ -312,9 +312,9 @@ mod tests {
         );
     }
 
-    use crate::direct::{estimate_calibration_direct, DirectFitParams};
-    use crate::edges::test_scene::fit_textured_scene;
-    use crate::online::{Measurement, OnlineCalibrator, OnlineConfig};
+    use crate::recalibration::direct::{estimate_calibration_direct, DirectFitParams};
+    use crate::recalibration::edges::test_scene::fit_textured_scene;
+    use crate::recalibration::{Measurement, OnlineCalibrator, OnlineConfig};
     use ndarray::{Array2, Array3};
 
     const TRUTH: Calibration = Calibration {
