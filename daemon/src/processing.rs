@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use dear_capture::{Calibration, RgbdFrame};
 use dear_pipeline::align::StaticAligner;
-use dear_pipeline::dear::{ChainError, ChainInput, ChainOutput, Prepared};
+use dear_pipeline::chain::{ChainError, ChainInput, ChainOutput, Prepared};
 use dear_pipeline::engine::{
     CalibrationPolicy, EngineConfig, FrameEngine, FrameReport, MeasurementSchedule,
 };

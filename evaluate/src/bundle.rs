@@ -16,7 +16,9 @@ use ndarray::Array2;
 use crate::methods::MethodOutput;
 use dear_capture::Sample;
 use dear_capture::{Calibration, RgbdFrame};
-use dear_pipeline::dear::{ChainError, ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
+use dear_pipeline::chain::{
+    ChainError, ChainInput, ChainMode, ChainOutput, ChainReport, DearChain,
+};
 use dear_pipeline::engine::{
     CalibrationPolicy, EngineConfig, EngineError, FrameEngine, FrameReport, MeasurementSchedule,
 };

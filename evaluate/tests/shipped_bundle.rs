@@ -128,7 +128,7 @@ fn online_tracking_follows_the_drifting_sample() {
 /// the low-error quarter within +0.28 / +0.39 cm of the input (models/edge/README.md).
 #[test]
 fn the_shipped_refiner_bounds_its_change_to_clean_depth() {
-    use dear_pipeline::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
+    use dear_pipeline::chain::preprocess::{normalize_amplitude_into, rgb_planes_into};
     use dear_pipeline::model::BundleRunner;
     use ndarray::Array2;
 
@@ -234,7 +234,7 @@ fn the_shipped_chain_finds_no_misalignment_in_aligned_frames() {
 /// classical stage is part of the first half.
 #[test]
 fn overlapped_frames_publish_the_same_bits_as_one_by_one() {
-    use dear_pipeline::dear::{ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
+    use dear_pipeline::chain::{ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
     use ndarray::Array2;
 
     let bundle = ModelBundle::load(root().join("models/edge")).unwrap();
@@ -311,7 +311,7 @@ fn overlapped_frames_publish_the_same_bits_as_one_by_one() {
 #[test]
 #[should_panic(expected = "only the latest prepared frame can be finished")]
 fn finishing_a_superseded_frame_is_refused() {
-    use dear_pipeline::dear::{ChainInput, ChainMode, ChainOutput, DearChain};
+    use dear_pipeline::chain::{ChainInput, ChainMode, ChainOutput, DearChain};
     use ndarray::Array2;
 
     let bundle = ModelBundle::load(root().join("models/edge")).unwrap();

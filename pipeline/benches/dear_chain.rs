@@ -13,7 +13,7 @@ use std::path::Path;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use dear_capture::{Calibration, Flow};
-use dear_pipeline::dear::{
+use dear_pipeline::chain::{
     CachedFusion, ChainInput, ChainMode, ChainOptions, ChainOutput, DearChain,
 };
 use dear_pipeline::model::kernel_apply::{apply_gated, GatedKernel, GATED_CHANNELS};

@@ -37,7 +37,7 @@ use std::num::NonZeroU32;
 
 use dear_proto::CalibrationHealth;
 
-use crate::dear::{
+use crate::chain::{
     BackgroundCalibrator, ChainError, ChainInput, ChainMode, ChainOutput, ChainReport, DearChain,
     DelayedCalibrator, Delivered, MeasureReport, Prepared, RefinementCheck, Submit,
 };

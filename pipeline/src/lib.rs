@@ -10,7 +10,8 @@
 //!   drifting calibration (estimator, observability and health, the per-frame edge check);
 //! - [`filter`]: the classical edge-aware refinement baseline;
 //! - [`model`]: model bundles (ONNX graphs + manifest) run by tract (feature `inference`);
-//! - [`dear`]: the paper's per-frame chain of networks and geometry (feature `inference`);
+//! - [`chain`]: the paper's per-frame chain of networks and geometry, and its calibration
+//!   measurement off the frame path (feature `inference`);
 //! - [`engine`]: the per-frame engine deard runs with a bundle (chain, online estimator,
 //!   measurement off the frame path, output guard) and `dear eval --online` evaluates
 //!   (feature `inference`);
@@ -21,7 +22,7 @@
 
 pub mod align;
 #[cfg(feature = "inference")]
-pub mod dear;
+pub mod chain;
 #[cfg(feature = "inference")]
 pub mod engine;
 pub mod filter;

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use dear_capture::CaptureDir;
 use dear_capture::{Calibration, RgbdFrame};
-use dear_pipeline::dear::{ChainInput, ChainOutput, DearChain};
+use dear_pipeline::chain::{ChainInput, ChainOutput, DearChain};
 use dear_pipeline::engine::{
     CalibrationPolicy, EngineConfig, FrameEngine, FrameReport, MeasurementSchedule,
 };

@@ -283,5 +283,5 @@ fn bad_sizes_and_shapes_are_errors_not_panics() {
 fn runners_can_move_to_another_thread() {
     fn assert_send<T: Send>() {}
     assert_send::<BundleRunner>();
-    assert_send::<dear_pipeline::dear::DearChain>();
+    assert_send::<dear_pipeline::chain::DearChain>();
 }

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use dear_capture::{Calibration, Flow};
 use dear_eval::metrics;
 use dear_pipeline::align::StaticAligner;
-use dear_pipeline::dear::{
+use dear_pipeline::chain::{
     CachedFusion, ChainError, ChainInput, ChainMode, ChainOptions, ChainOutput, DearChain,
 };
 use dear_pipeline::geometry::warp_depth;
@@ -119,7 +119,7 @@ fn run(
     chain: &mut DearChain,
     p: &Parity,
     mode: ChainMode,
-) -> (dear_pipeline::dear::ChainReport, Outputs) {
+) -> (dear_pipeline::chain::ChainReport, Outputs) {
     let rgb = p.rgb();
     let mut out = Outputs {
         depth: Array2::zeros((p.h, p.w)),
@@ -327,7 +327,7 @@ fn wrong_shapes_are_errors_and_write_nothing() {
     assert!(depth.iter().all(|&z| z == 7.0));
 }
 
-/// The Cached-mode decision (see `dear::chain::CachedFusion`): on the parity frame, with the
+/// The Cached-mode decision (see `chain::dear_chain::CachedFusion`): on the parity frame, with the
 /// true calibration, compare the final flow and depth of Skip and Run against ground truth.
 /// Prints the figures (`cargo test -p dear-pipeline --test model_chain -- --nocapture`).
 #[test]
@@ -426,7 +426,7 @@ fn full_mode_refines_the_network_calibration_by_the_direct_fit() {
 /// its caller wait, takes one frame at a time, and refuses a frame of the wrong shape.
 #[test]
 fn the_background_worker_measures_what_a_full_frame_measures() {
-    use dear_pipeline::dear::{BackgroundCalibrator, Submit};
+    use dear_pipeline::chain::{BackgroundCalibrator, Submit};
     let p = Parity::load();
     let mut inline = DearChain::new(&bundle(), p.w, p.h).unwrap();
     let (report, _) = run(&mut inline, &p, ChainMode::Full);
@@ -473,7 +473,7 @@ fn the_background_worker_measures_what_a_full_frame_measures() {
 #[cfg(target_os = "linux")]
 #[test]
 fn the_background_worker_runs_at_the_lowest_priority() {
-    use dear_pipeline::dear::BackgroundCalibrator;
+    use dear_pipeline::chain::BackgroundCalibrator;
     let p = Parity::load();
     let chain = DearChain::new(&bundle(), p.w, p.h).unwrap();
     let name = "nice-worker"; // within the 15 bytes a thread name keeps

@@ -32,7 +32,7 @@
 //!   reported figure, and moving it to the lower median would change published calibrations
 //!   and generated data sets; it lives here so that it, too, is written once.
 //! - The amplitude normalisation's percentile (numpy's `linear`,
-//!   `dear_pipeline::dear::preprocess::percentile_linear`): part of the model bundle contract,
+//!   `dear_pipeline::chain::preprocess::percentile_linear`): part of the model bundle contract,
 //!   matched to the training code bit for bit.
 //! - The evaluation's error classes (`dear_eval::metrics`, `train/dear_train/metrics.py`):
 //!   the paper's protocol, shared with Python through `fixtures/metrics/`.

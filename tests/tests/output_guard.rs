@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use dear_capture::{CaptureDir, RgbdFrame};
 use dear_e2e_tests::bundles::{broken_refine_graph, smoke_bundle_with_refine};
-use dear_pipeline::dear::{ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
+use dear_pipeline::chain::{ChainInput, ChainMode, ChainOutput, ChainReport, DearChain};
 use dear_pipeline::filter::ClassicalRefiner;
 use dear_pipeline::model::ModelBundle;
 use ndarray::Array2;

@@ -9,7 +9,7 @@
 //! - [`error`]: the error type, [`BundleError`].
 //!
 //! The warps, the least-squares calibration and the normalisation are not in the graphs: they
-//! run in Rust ([`crate::dear`]) between the three networks.
+//! run in Rust ([`crate::chain`]) between the three networks.
 
 pub mod bundle;
 pub mod error;

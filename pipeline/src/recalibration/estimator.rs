@@ -40,7 +40,7 @@
 //!    Without this the estimate would lag OIS-like wander of the principal point (pixels per
 //!    second) by about `interval_frames · window / 2` frames.
 //!
-//! **Network frames in the background** ([`crate::dear::BackgroundCalibrator`]): when the
+//! **Network frames in the background** ([`crate::chain::BackgroundCalibrator`]): when the
 //! network runs on a worker instead of inline, the caller answers a frame that asks for it with
 //! [`OnlineCalibrator::defer_network`] (the worker took the frame; it is processed as an
 //! ordinary frame meanwhile, and tracked) or [`OnlineCalibrator::network_busy`] (the worker is

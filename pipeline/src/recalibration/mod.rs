@@ -25,7 +25,7 @@
 //!   correction the estimator tracks between network frames.
 //!
 //! Independent of tract: it works on flows, depths and images, whoever computed them. The
-//! chain (`dear`, feature `inference`) runs the networks whose flow these fits take.
+//! chain (`chain`, feature `inference`) runs the networks whose flow these fits take.
 
 pub mod direct;
 pub mod edges;

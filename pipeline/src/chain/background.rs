@@ -35,7 +35,7 @@ use std::time::{Duration, Instant};
 
 use ndarray::{Array2, Array3};
 
-use crate::dear::chain::{ChainError, ChainInput, DearChain, MeasureReport};
+use crate::chain::dear_chain::{ChainError, ChainInput, DearChain, MeasureReport};
 use dear_capture::calibration::Calibration;
 
 /// The worker's nice value relative to the caller (Linux: nice is per thread); see the module

@@ -21,9 +21,9 @@ use std::time::{Duration, Instant};
 use ndarray::{Array2, ArrayView2, ArrayView3, ArrayViewMut2, Zip};
 
 use crate::align::StaticAligner;
-use crate::dear::confidence::{confidence_into, expected_error_confidence_into};
-use crate::dear::output_guard::{OutputGuard, RefinementCheck};
-use crate::dear::preprocess::{normalize_amplitude_into, rgb_planes_into};
+use crate::chain::confidence::{confidence_into, expected_error_confidence_into};
+use crate::chain::output_guard::{OutputGuard, RefinementCheck};
+use crate::chain::preprocess::{normalize_amplitude_into, rgb_planes_into};
 use crate::filter::ClassicalRefiner;
 use crate::geometry::{warp_depth, warp_depth_and_bilinear};
 use crate::model::{BundleError, BundleRunner, ModelBundle, Normalisation, RunnerOptions};
@@ -151,7 +151,7 @@ impl ChainInput<'_> {
 pub struct ChainOutput<'a> {
     /// Aligned refined depth `(H, W)`, metres; `0` where no ToF measurement maps to the pixel.
     pub depth: ArrayViewMut2<'a, f32>,
-    /// Confidence `(H, W)`, 0..=255 (see [`crate::dear::confidence`]).
+    /// Confidence `(H, W)`, 0..=255 (see [`crate::chain::confidence`]).
     pub confidence: ArrayViewMut2<'a, u8>,
 }
 

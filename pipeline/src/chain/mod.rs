@@ -3,7 +3,7 @@
 //! aligned refined depth and a confidence map into caller-provided views.
 //!
 //! - [`preprocess`]: amplitude and RGB normalisation as the bundle defines it;
-//! - [`chain`]: [`DearChain`], `Full` (the paper) and `Cached(calibration)` modes, a frame in
+//! - [`dear_chain`]: [`DearChain`], `Full` (the paper) and `Cached(calibration)` modes, a frame in
 //!   two halves that consecutive frames can overlap;
 //! - [`background`]: [`BackgroundCalibrator`], a `Full` frame's calibration measurement on a
 //!   worker thread, so network frames do not stall the frame path, and [`DelayedCalibrator`],
@@ -13,13 +13,13 @@
 //!   physics; a frame it rejects is refined classically instead.
 
 pub mod background;
-pub mod chain;
 pub mod confidence;
+pub mod dear_chain;
 pub mod output_guard;
 pub mod preprocess;
 
 pub use background::{BackgroundCalibrator, DelayedCalibrator, Delivered, Submit};
-pub use chain::{
+pub use dear_chain::{
     CachedFusion, ChainError, ChainInput, ChainMode, ChainOptions, ChainOutput, ChainReport,
     DearChain, MeasureReport, Prepared, StageTimings,
 };
