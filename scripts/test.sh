@@ -125,6 +125,12 @@ done
 # purged here when root. About 14 minutes on 2 cores, 12 of them the cold aarch64 build.
 tier "aarch64 under emulation (scripts/test-aarch64.sh)"
 scripts/test-aarch64.sh
+# The Python wheels (issue 35): CPython 3.11 wheels for x86_64 and aarch64, each installed by pip
+# into a fresh place and receiving frames from a real deard of its architecture, equal to `dear
+# dump`'s (aarch64 under qemu-user: the board tier's binaries and Debian's arm64 python3.11);
+# about 3 minutes, most of it the two release builds of the extension.
+tier "Python wheels (scripts/test-wheels.sh)"
+scripts/test-wheels.sh
 tier "Debian packages (scripts/build-deb.sh)"
 scripts/build-deb.sh
 if [ "$(id -u)" = 0 ]; then
