@@ -18,7 +18,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
-cargo build --release --quiet -p dear-synth -p dear-cli -p deard
+cargo build --release --quiet -p dear-synth -p dear-cli -p deard -p dear-tools
 
 data=${DEAR_DATA:-data}/results
 out=out/results

@@ -12,8 +12,8 @@
 #   defaults: --frames 100000 --until published --engine classical --capture samples/demo
 #             --pacing fast --out out/soak/<engine>-<frames> --hold-ms 200 --stall-s 120
 #             --deard target/release/deard
-#             --client target/release/examples/soak_client
-#               (cargo build --release -p dear-cli --example soak_client)
+#             --client target/release/soak_client
+#               (cargo build --release -p dear-tools --bin soak_client)
 #
 # About every second it records (OUT/timeseries.csv): the daemon's resident memory (VmRSS, and its
 # anonymous and shared-memory parts, from /proc/PID/status), the shared memory the daemon has
@@ -51,7 +51,7 @@ pacing=fast
 out=
 hold_ms=200
 deard=$repo/target/release/deard
-client=$repo/target/release/examples/soak_client
+client=$repo/target/release/soak_client
 stall_s=120
 
 while [ $# -gt 0 ]; do
@@ -92,7 +92,7 @@ case $pacing in fast | timestamps) ;; *) die "--pacing must be fast or timestamp
 [ -f "$capture/capture.json" ] || die "--capture $capture has no capture.json"
 [ -x "$deard" ] || die "deard not found at $deard (cargo build --release -p deard, or --deard)"
 [ -x "$client" ] ||
-    die "soak_client not found at $client (cargo build --release -p dear-cli --example soak_client, or --client)"
+    die "soak_client not found at $client (cargo build --release -p dear-tools --bin soak_client, or --client)"
 command -v python3 >/dev/null || die "python3 is needed for the summary"
 capture=$(cd "$capture" && pwd)
 out=${out:-$repo/out/soak/$engine-$frames}

@@ -2,7 +2,7 @@
 # Tests the workspace as 64-bit ARM binaries (aarch64-unknown-linux-gnu), cross-built here and
 # run under qemu-user (issue 18): what a Raspberry Pi 4/5, Jetson or i.MX 8 board would run.
 #
-# 1. Cross-build, release: deard and dear, chain_depth (tests/src/bin), and the unit tests of
+# 1. Cross-build, release: deard and dear, chain_depth (tools/), and the unit tests of
 #    dear-pipeline (geometry, the classical filter, calibration, the online estimator, the
 #    bundle format: every test of its library). The two cargo invocations select packages so
 #    that every dependency gets the same features in both (dear-pipeline's dev-dependencies
@@ -62,7 +62,7 @@ a64_cargo() { CARGO_TARGET_DIR=$a64_target_dir cargo "$@" --release --target "$t
 # --- 1. cross-build -------------------------------------------------------------------------
 step "cross-build for $triple in $a64_target_dir (release): deard, dear, chain_depth, dear-pipeline's unit tests"
 t=$(now)
-a64_cargo build --quiet -p deard -p dear-cli -p dear-e2e-tests -p dear-pipeline \
+a64_cargo build --quiet -p deard -p dear-cli -p dear-tools -p dear-pipeline \
     --bin deard --bin dear --bin chain_depth --example write_geometry_fixtures
 if $build_only; then
     echo "cross-build: $(since "$t") s"
@@ -71,7 +71,7 @@ fi
 # The library's test executable (the same packages' libraries, for the same features).
 mkdir -p "$a64_target_dir"
 a64_cargo test --quiet --no-run --message-format=json \
-    -p dear-pipeline -p deard -p dear-cli -p dear-e2e-tests --lib \
+    -p dear-pipeline -p deard -p dear-cli -p dear-tools --lib \
     >"$a64_target_dir/test-build.json" 2>"$a64_target_dir/test-build.log" \
     || fail "building the unit tests for $triple failed: $(cat "$a64_target_dir/test-build.log")"
 unit_tests=$(python3 -c '
@@ -120,7 +120,7 @@ cleanup() {
 trap cleanup EXIT
 
 step "models/edge on $frames frames of samples/demo: x86-64 native against aarch64 under qemu"
-cargo build --release --quiet -p deard -p dear-cli -p dear-e2e-tests \
+cargo build --release --quiet -p deard -p dear-cli -p dear-tools \
     --bin deard --bin dear --bin chain_depth
 native=target/release/chain_depth
 chain_args=(run --bundle models/edge --capture samples/demo --frames "$frames")

@@ -22,7 +22,7 @@
 #                     instances; known 'Y16 ' depth frames (millimetres) are fed into the first
 #                     one's output and looped into its capture node (the ToF node), the second's
 #                     capture node is the RGB node (YUYV); deard (target/release, built first:
-#                     cargo build --release -p deard -p dear-cli -p dear-e2e-tests) captures
+#                     cargo build --release -p deard -p dear-cli -p dear-tools) captures
 #                     both with refine = "none" and a zero calibration, and dear-v4l-check must
 #                     receive exactly the fed depths, with the fed block beyond the module's
 #                     max_range_m (4 m) published invalid; then vivid is unbound and bound
@@ -277,7 +277,7 @@ fi
 if $deard; then
     release=$(cd "$vm_dir/../.." && pwd)/target/release
     for b in deard dear dear-v4l-check; do
-        [ -x "$release/$b" ] || die "--deard needs $release/$b: cargo build --release -p deard -p dear-cli -p dear-e2e-tests"
+        [ -x "$release/$b" ] || die "--deard needs $release/$b: cargo build --release -p deard -p dear-cli -p dear-tools"
         bins+=("$release/$b")
     done
     python3 "$vm_dir/fed_frames.py" 640 480 4 > "$work/fed.y16"

@@ -107,7 +107,7 @@ fi
 # receives, through a device loss, and from a replay of its recording. About a minute warm,
 # plus the release build of the three binaries.
 tier "V4L2 in a VM (scripts/test-v4l2-vm.sh --self-test, --deard)"
-cargo build --release --quiet -p deard -p dear-cli -p dear-e2e-tests \
+cargo build --release --quiet -p deard -p dear-cli -p dear-tools \
     --bin deard --bin dear --bin dear-v4l-check
 for mode in self-test deard; do
     if ! scripts/test-v4l2-vm.sh "--$mode" > "target/v4l2-vm-$mode.log" 2>&1; then

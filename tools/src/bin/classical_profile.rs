@@ -2,8 +2,8 @@
 //! of a capture, calling the stage functions directly, and the whole `refine_into` as well.
 //!
 //! ```text
-//! cargo build --release -p dear-pipeline --example classical_profile
-//! target/release/examples/classical_profile CAPTURE [--frames N] [--iters N]
+//! cargo build --release -p dear-tools --bin classical_profile
+//! target/release/classical_profile CAPTURE [--frames N] [--iters N]
 //!     [--dump DIR] [--check DIR]
 //! ```
 //!

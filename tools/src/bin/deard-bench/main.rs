@@ -20,6 +20,7 @@
 //! (`cores`).
 //!
 //! ```sh
+//! cargo build --release -p dear-synth -p dear-tools --bin dear-synth --bin deard-bench
 //! target/release/dear-synth sequence --frames 60 --width 640 --height 480 --seed 5 --out /tmp/vga
 //! target/release/deard-bench --capture /tmp/vga --bundle models/edge
 //! target/release/deard-bench --capture /tmp/vga --mode online --pin-cpu 0 --hog-cpu 1

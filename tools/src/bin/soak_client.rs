@@ -2,7 +2,7 @@
 //! and how late frames arrived, and writes that as JSON when it stops.
 //!
 //! ```text
-//! cargo run --release -p dear-cli --example soak_client -- \
+//! cargo run --release -p dear-tools --bin soak_client -- \
 //!     --service dear/cam0/frames [--hold-ms 200] [--loop-frames 42] [--frames N] \
 //!     [--report report.json]
 //! ```

@@ -61,7 +61,7 @@ fn main() {
     let printer = thread::spawn(move || {
         let mut out = std::io::stdout().lock();
         for (h, payload) in rx {
-            let hash = dear_e2e_tests::sha256_hex(&payload);
+            let hash = dear_pipeline::model::hex_sha256(&payload);
             writeln!(
                 out,
                 "frame {} {:016x} {} {} {} {hash} {:x} {}",

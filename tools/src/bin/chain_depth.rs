@@ -5,7 +5,7 @@
 //! kernels must give the same depth as the x86 ones (issue 18).
 //!
 //! ```text
-//! cargo run --release -p dear-e2e-tests --bin chain_depth -- \
+//! cargo run --release -p dear-tools --bin chain_depth -- \
 //!     run --bundle models/edge --capture samples/demo --frames 3 --out x86.depth
 //! chain_depth compare x86.depth arm.depth --tolerance-mm 1
 //! ```

@@ -2,8 +2,8 @@
 //! publisher and the real client SDK, with N subscriber processes woken by events.
 //!
 //! ```sh
-//! cargo run --release -p dear-e2e-tests --bin dear-ipc-bench -- --subscribers 1
-//! cargo run --release -p dear-e2e-tests --bin dear-ipc-bench -- --subscribers 4
+//! cargo run --release -p dear-tools --bin dear-ipc-bench -- --subscribers 1
+//! cargo run --release -p dear-tools --bin dear-ipc-bench -- --subscribers 4
 //! ```
 //!
 //! Latency = the subscriber's `CLOCK_MONOTONIC` on return from `Client::wait` minus the

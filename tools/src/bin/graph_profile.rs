@@ -3,7 +3,7 @@
 //! are synthetic (the time does not depend on the values).
 //!
 //! ```sh
-//! cargo run --release -p dear-pipeline --example graph_profile -- models/edge/refine.onnx 480 640 1,1,3,1
+//! cargo run --release -p dear-tools --bin graph_profile -- models/edge/refine.onnx 480 640 1,1,3,1
 //! ```
 //! Arguments: the ONNX file, height, width, and the channel count of each graph input in the
 //! graph's order (the refine graph: amplitude, depth, rgb, classical).

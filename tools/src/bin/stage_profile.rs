@@ -3,8 +3,8 @@
 //! the edge check, and with `--full` the classical filter and the refine graph as well.
 //!
 //! ```text
-//! cargo build --release -p dear-pipeline --example stage_profile
-//! target/release/examples/stage_profile CAPTURE BUNDLE [--full] [--iters N] [--dump DIR]
+//! cargo build --release -p dear-tools --bin stage_profile
+//! target/release/stage_profile CAPTURE BUNDLE [--full] [--iters N] [--dump DIR]
 //!     [--worker N] [--tract-threads N]
 //! ```
 //!
