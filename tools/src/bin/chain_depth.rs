@@ -1,8 +1,9 @@
 //! `chain_depth`: the DEAR chain's output depth on frames of a capture, written to a file, and
-//! the comparison of two such files (a bin of the end-to-end tests crate, so that it builds with
-//! the features of `deard` and `dear` and shares their compiled dependencies). `scripts/test-aarch64.sh` runs it natively and as an
-//! aarch64 binary under qemu-user on the same frames and bundle, then compares: tract's ARM
-//! kernels must give the same depth as the x86 ones (issue 18).
+//! the comparison of two such files (a bin of `dear-tools`, built in the same cargo invocation
+//! as `deard` and `dear`, so that it has their features and shares their compiled
+//! dependencies). `scripts/test-aarch64.sh` runs it natively and as an aarch64 binary under
+//! qemu-user on the same frames and bundle, then compares: tract's ARM kernels must give the
+//! same depth as the x86 ones (issue 18).
 //!
 //! ```text
 //! cargo run --release -p dear-tools --bin chain_depth -- \
