@@ -60,7 +60,23 @@
 #define DEAR_MAX_HELD_FRAMES 2
 
 // Frame format version this library reads (`dear_header.version`).
-#define DEAR_FORMAT_VERSION 2
+#define DEAR_FORMAT_VERSION 3
+
+// `sizeof(dear_header)`: format 3's header.
+#define DEAR_HEADER_SIZE 256
+
+// `dear_header.depth_unit_m`: the depth plane is float metres.
+#define DEAR_DEPTH_UNIT_M 1.0
+
+// `dear_header.rgb_camera_model`: no intrinsics known (the `rgb_*` fields are zero).
+#define DEAR_CAMERA_MODEL_UNKNOWN 0
+
+// `dear_header.rgb_camera_model`: a pinhole, `rgb_fx, rgb_fy, rgb_cx, rgb_cy`.
+#define DEAR_CAMERA_MODEL_PINHOLE 1
+
+// `dear_header.rgb_camera_model`: a pinhole with Brown–Conrady distortion, `rgb_distortion`
+// = k1, k2, p1, p2, k3 (OpenCV's order, ROS's `plumb_bob`).
+#define DEAR_CAMERA_MODEL_BROWN_CONRADY 2
 
 // `dear_header.magic`: "DEAR" as little-endian bytes.
 #define DEAR_MAGIC 1380009284
@@ -131,6 +147,9 @@ typedef enum dear_status {
   // A signal interrupted the wait (e.g. SIGINT with a handler installed): check your flag
   // and call again.
   DEAR_INTERRUPTED = -6,
+  // `dear_frame_point_cloud`: the frame carries no intrinsics (`rgb_camera_model` is
+  // `DEAR_CAMERA_MODEL_UNKNOWN`) or unusable ones; the message names the field.
+  DEAR_NO_INTRINSICS = -7,
   // A bug: the library panicked. The message says where; the client may be unusable.
   DEAR_PANIC = -99,
 } dear_status;
@@ -143,7 +162,8 @@ typedef struct dear_client dear_client;
 // until `dear_frame_release`.
 typedef struct dear_frame dear_frame;
 
-// The header of a frame: the protocol's `DearFrameHeader` (192 bytes, README "Frame layout"),
+// The header of a frame: the protocol's `DearFrameHeader` (256 bytes, docs/protocol.md
+// "Frame layout"),
 // field for field. `dear_frame_header()` returns a pointer to it in shared memory (not named
 // `dear_frame_header` itself: in C a type and a function cannot share a name).
 typedef struct dear_header {
@@ -202,8 +222,23 @@ typedef struct dear_header {
   uint8_t calib_health;
   // Directions of (t_x, t_y, c_x, c_y) the last calibration measurement constrained, 0–4.
   uint8_t calib_constrained;
+  // Model of the RGB intrinsics below, `DEAR_CAMERA_MODEL_*`: 0 unknown (the fields are
+  // zero; no point cloud), 1 pinhole, 2 Brown–Conrady.
+  uint16_t rgb_camera_model;
+  // Metres per depth unit: `DEAR_DEPTH_UNIT_M` (1.0; frames with another value are refused).
+  float depth_unit_m;
+  // RGB camera focal length x, px, at the frame's size (the depth's too: it is aligned).
+  float rgb_fx;
+  // Focal length y, px.
+  float rgb_fy;
+  // Principal point x, px (pixel centres at integer coordinates).
+  float rgb_cx;
+  // Principal point y, px.
+  float rgb_cy;
+  // Model 2: k1, k2, p1, p2, k3; otherwise zero.
+  float rgb_distortion[5];
   // Zero.
-  uint8_t reserved[6];
+  uint8_t reserved[28];
 } dear_header;
 
 #ifdef __cplusplus
@@ -304,6 +339,33 @@ const uint8_t *dear_frame_rgb(const struct dear_frame *frame, size_t *len);
 //
 // As `dear_frame_depth`.
 const uint8_t *dear_frame_confidence(const struct dear_frame *frame, size_t *len);
+
+// The frame's point cloud, organised: for pixel `i = v·width + u` (row-major, as the planes),
+// `xyz[3i .. 3i+3]` is the point `(x, y, z)` in metres in the RGB camera's optical frame (x
+// right, y down, z forward) and `valid[i]` is 1, or — where the pixel has no valid depth, or
+// its ray cannot be undistorted — `xyz` is NaN and `valid[i]` is 0 (never a point at the
+// origin). Its colour is `dear_frame_rgb()[3i .. 3i+3]`, its confidence
+// `dear_frame_confidence()[i]`.
+//
+// The math is the Rust SDK's (`dear_client::points`): the pixel's ray from the header's
+// intrinsics — pinhole `((u − cx)/fx, (v − cy)/fy)`, with Brown–Conrady distortion undone by
+// Newton's method — times the z-depth.
+//
+// `xyz_len` must be `3·width·height` floats, `valid_len` `width·height` bytes; `valid` may be
+// NULL (then `valid_len` is ignored; test `isnan(xyz[3i + 2])` instead). Returns `DEAR_OK`;
+// `DEAR_NO_INTRINSICS` when the header has no (or unusable) intrinsics; `DEAR_INVALID_ARGUMENT`
+// for a NULL `frame`/`xyz` or a wrong length (the message names it). Nothing is written on
+// failure.
+//
+// # Safety
+//
+// `frame` must be NULL or a frame from `dear_client_wait` not yet released; `xyz` NULL or
+// valid for writes of `xyz_len` floats; `valid` NULL or valid for writes of `valid_len` bytes.
+enum dear_status dear_frame_point_cloud(const struct dear_frame *frame,
+                                        float *xyz,
+                                        size_t xyz_len,
+                                        uint8_t *valid,
+                                        size_t valid_len);
 
 // The expected absolute depth error in metres that confidence `code` stands for in a frame
 // with `DEAR_FLAG_CONFIDENCE_EXPECTED_ERROR`: `0.001 · 2^((255 − code) / 16)` (255: 1 mm,

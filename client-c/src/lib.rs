@@ -14,7 +14,7 @@
 //! [`dear_proto::FrameHeader`] (its layout is asserted at compile time below), and
 //! [`dear_frame_header`] returns a pointer to the header *in shared memory*. One struct rather than an accessor per field: C code reads fields as it would read
 //! the README's table, nothing is copied, and the layout is the protocol's, fixed by
-//! `FORMAT_VERSION`; accessors would add 27 functions for no safety gained (the pointer is
+//! `FORMAT_VERSION`; accessors would add 34 functions for no safety gained (the pointer is
 //! valid exactly as long as the depth pointer is).
 
 // The exported names are C's (`dear_client`, `DEAR_OK`): they appear as written in the header.
@@ -53,6 +53,9 @@ pub enum dear_status {
     /// A signal interrupted the wait (e.g. SIGINT with a handler installed): check your flag
     /// and call again.
     DEAR_INTERRUPTED = -6,
+    /// `dear_frame_point_cloud`: the frame carries no intrinsics (`rgb_camera_model` is
+    /// `DEAR_CAMERA_MODEL_UNKNOWN`) or unusable ones; the message names the field.
+    DEAR_NO_INTRINSICS = -7,
     /// A bug: the library panicked. The message says where; the client may be unusable.
     DEAR_PANIC = -99,
 }
@@ -61,7 +64,18 @@ pub enum dear_status {
 /// `QOS_SUBSCRIBER_BORROWED`. `dear_client_wait` returns `DEAR_TOO_MANY_FRAMES_HELD` beyond it.
 pub const DEAR_MAX_HELD_FRAMES: usize = 2;
 /// Frame format version this library reads (`dear_header.version`).
-pub const DEAR_FORMAT_VERSION: u32 = 2;
+pub const DEAR_FORMAT_VERSION: u32 = 3;
+/// `sizeof(dear_header)`: format 3's header.
+pub const DEAR_HEADER_SIZE: usize = 256;
+/// `dear_header.depth_unit_m`: the depth plane is float metres.
+pub const DEAR_DEPTH_UNIT_M: f32 = 1.0;
+/// `dear_header.rgb_camera_model`: no intrinsics known (the `rgb_*` fields are zero).
+pub const DEAR_CAMERA_MODEL_UNKNOWN: u16 = 0;
+/// `dear_header.rgb_camera_model`: a pinhole, `rgb_fx, rgb_fy, rgb_cx, rgb_cy`.
+pub const DEAR_CAMERA_MODEL_PINHOLE: u16 = 1;
+/// `dear_header.rgb_camera_model`: a pinhole with Brown–Conrady distortion, `rgb_distortion`
+/// = k1, k2, p1, p2, k3 (OpenCV's order, ROS's `plumb_bob`).
+pub const DEAR_CAMERA_MODEL_BROWN_CONRADY: u16 = 2;
 /// `dear_header.magic`: "DEAR" as little-endian bytes.
 pub const DEAR_MAGIC: u32 = 0x52414544;
 /// Bytes of `dear_header.bundle` (UTF-8, NUL-padded: not NUL-terminated when full).
@@ -108,6 +122,11 @@ const _: () = {
     );
     assert!(DEAR_MAX_HELD_FRAMES == dear_proto::service::QOS_SUBSCRIBER_BORROWED);
     assert!(DEAR_FORMAT_VERSION == dear_proto::FORMAT_VERSION);
+    assert!(DEAR_HEADER_SIZE == dear_proto::HEADER_SIZE);
+    assert!(DEAR_DEPTH_UNIT_M == dear_proto::DEPTH_UNIT_M);
+    assert!(DEAR_CAMERA_MODEL_UNKNOWN == dear_proto::camera_model::UNKNOWN);
+    assert!(DEAR_CAMERA_MODEL_PINHOLE == dear_proto::camera_model::PINHOLE);
+    assert!(DEAR_CAMERA_MODEL_BROWN_CONRADY == dear_proto::camera_model::BROWN_CONRADY);
     assert!(DEAR_MAGIC == dear_proto::MAGIC);
     assert!(DEAR_BUNDLE_NAME_LEN == dear_proto::header::BUNDLE_NAME_LEN);
     assert!(DEAR_STAGE_COUNT == dear_proto::Stage::ALL.len());
@@ -120,7 +139,8 @@ const _: () = {
     assert!(DEAR_FLAG_CONFIDENCE_EXPECTED_ERROR == dear_proto::flags::CONFIDENCE_EXPECTED_ERROR);
 };
 
-/// The header of a frame: the protocol's `DearFrameHeader` (192 bytes, README "Frame layout"),
+/// The header of a frame: the protocol's `DearFrameHeader` (256 bytes, docs/protocol.md
+/// "Frame layout"),
 /// field for field. `dear_frame_header()` returns a pointer to it in shared memory (not named
 /// `dear_frame_header` itself: in C a type and a function cannot share a name).
 #[repr(C)]
@@ -181,8 +201,23 @@ pub struct dear_header {
     pub calib_health: u8,
     /// Directions of (t_x, t_y, c_x, c_y) the last calibration measurement constrained, 0–4.
     pub calib_constrained: u8,
+    /// Model of the RGB intrinsics below, `DEAR_CAMERA_MODEL_*`: 0 unknown (the fields are
+    /// zero; no point cloud), 1 pinhole, 2 Brown–Conrady.
+    pub rgb_camera_model: u16,
+    /// Metres per depth unit: `DEAR_DEPTH_UNIT_M` (1.0; frames with another value are refused).
+    pub depth_unit_m: f32,
+    /// RGB camera focal length x, px, at the frame's size (the depth's too: it is aligned).
+    pub rgb_fx: f32,
+    /// Focal length y, px.
+    pub rgb_fy: f32,
+    /// Principal point x, px (pixel centres at integer coordinates).
+    pub rgb_cx: f32,
+    /// Principal point y, px.
+    pub rgb_cy: f32,
+    /// Model 2: k1, k2, p1, p2, k3; otherwise zero.
+    pub rgb_distortion: [f32; 5],
     /// Zero.
-    pub reserved: [u8; 6],
+    pub reserved: [u8; 28],
 }
 
 // The mirror has the protocol struct's size, alignment and every field's offset; with
@@ -224,6 +259,13 @@ const _: () = {
         sequence,
         calib_health,
         calib_constrained,
+        rgb_camera_model,
+        depth_unit_m,
+        rgb_fx,
+        rgb_fy,
+        rgb_cx,
+        rgb_cy,
+        rgb_distortion,
         reserved,
     );
 };
@@ -260,6 +302,13 @@ impl dear_header {
             sequence,
             calib_health,
             calib_constrained,
+            rgb_camera_model,
+            depth_unit_m,
+            rgb_fx,
+            rgb_fy,
+            rgb_cx,
+            rgb_cy,
+            rgb_distortion,
             reserved,
         } = *h;
         dear_header {
@@ -290,6 +339,13 @@ impl dear_header {
             sequence,
             calib_health,
             calib_constrained,
+            rgb_camera_model,
+            depth_unit_m,
+            rgb_fx,
+            rgb_fy,
+            rgb_cx,
+            rgb_cy,
+            rgb_distortion,
             reserved,
         }
     }
@@ -654,6 +710,83 @@ pub unsafe extern "C" fn dear_frame_confidence(
     unsafe { plane("dear_frame_confidence", frame, len, Frame::confidence) }
 }
 
+/// The frame's point cloud, organised: for pixel `i = v·width + u` (row-major, as the planes),
+/// `xyz[3i .. 3i+3]` is the point `(x, y, z)` in metres in the RGB camera's optical frame (x
+/// right, y down, z forward) and `valid[i]` is 1, or — where the pixel has no valid depth, or
+/// its ray cannot be undistorted — `xyz` is NaN and `valid[i]` is 0 (never a point at the
+/// origin). Its colour is `dear_frame_rgb()[3i .. 3i+3]`, its confidence
+/// `dear_frame_confidence()[i]`.
+///
+/// The math is the Rust SDK's (`dear_client::points`): the pixel's ray from the header's
+/// intrinsics — pinhole `((u − cx)/fx, (v − cy)/fy)`, with Brown–Conrady distortion undone by
+/// Newton's method — times the z-depth.
+///
+/// `xyz_len` must be `3·width·height` floats, `valid_len` `width·height` bytes; `valid` may be
+/// NULL (then `valid_len` is ignored; test `isnan(xyz[3i + 2])` instead). Returns `DEAR_OK`;
+/// `DEAR_NO_INTRINSICS` when the header has no (or unusable) intrinsics; `DEAR_INVALID_ARGUMENT`
+/// for a NULL `frame`/`xyz` or a wrong length (the message names it). Nothing is written on
+/// failure.
+///
+/// # Safety
+///
+/// `frame` must be NULL or a frame from `dear_client_wait` not yet released; `xyz` NULL or
+/// valid for writes of `xyz_len` floats; `valid` NULL or valid for writes of `valid_len` bytes.
+#[no_mangle]
+pub unsafe extern "C" fn dear_frame_point_cloud(
+    frame: *const dear_frame,
+    xyz: *mut f32,
+    xyz_len: usize,
+    valid: *mut u8,
+    valid_len: usize,
+) -> dear_status {
+    const NAME: &str = "dear_frame_point_cloud";
+    guard(NAME, || {
+        // SAFETY: the caller promises NULL or a live frame from `dear_client_wait`.
+        let frame = &unsafe { frame.as_ref() }
+            .ok_or_else(|| invalid(NAME, "frame"))?
+            .frame;
+        if xyz.is_null() {
+            return Err(invalid(NAME, "xyz"));
+        }
+        let header = frame.header();
+        let no_intrinsics = |e: sdk::PointCloudError| {
+            Failure(dear_status::DEAR_NO_INTRINSICS, format!("{NAME}: {e}"))
+        };
+        let intrinsics = sdk::points::header_intrinsics(header).map_err(no_intrinsics)?;
+        let (width, height) = frame.size();
+        let rays = sdk::Rays::new(&intrinsics, width, height).map_err(|source| {
+            no_intrinsics(sdk::PointCloudError::Intrinsics {
+                frame_id: header.frame_id,
+                source,
+            })
+        })?;
+        let wrong_length = |e: sdk::PointCloudError| {
+            Failure(dear_status::DEAR_INVALID_ARGUMENT, format!("{NAME}: {e}"))
+        };
+        rays.check_len("`xyz` (xyz_len)", xyz_len, 3)
+            .map_err(wrong_length)?;
+        if !valid.is_null() {
+            rays.check_len("`valid` (valid_len)", valid_len, 1)
+                .map_err(wrong_length)?;
+        }
+        // SAFETY: not NULL, and the caller promises `xyz_len` writable floats, which is
+        // 3·width·height (checked above); no Rust reference to them exists elsewhere.
+        let xyz = unsafe { std::slice::from_raw_parts_mut(xyz, xyz_len) };
+        let mut valid = (!valid.is_null()).then(|| {
+            // SAFETY: as for `xyz`: `valid_len` = width·height writable bytes (checked).
+            unsafe { std::slice::from_raw_parts_mut(valid, valid_len) }
+        });
+        rays.back_project_with(frame.depth(), |i, point| {
+            xyz[3 * i..3 * i + 3].copy_from_slice(&point.unwrap_or([f32::NAN; 3]));
+            if let Some(valid) = valid.as_deref_mut() {
+                valid[i] = u8::from(point.is_some());
+            }
+        })
+        .map_err(wrong_length)?;
+        Ok(dear_status::DEAR_OK)
+    })
+}
+
 /// The expected absolute depth error in metres that confidence `code` stands for in a frame
 /// with `DEAR_FLAG_CONFIDENCE_EXPECTED_ERROR`: `0.001 · 2^((255 − code) / 16)` (255: 1 mm,
 /// 202: 1 cm, 149: 10 cm); NaN for 0 (no depth).
@@ -689,6 +822,7 @@ pub extern "C" fn dear_status_name(status: dear_status) -> *const c_char {
         DEAR_BAD_FRAME => c"DEAR_BAD_FRAME",
         DEAR_TOO_MANY_FRAMES_HELD => c"DEAR_TOO_MANY_FRAMES_HELD",
         DEAR_INTERRUPTED => c"DEAR_INTERRUPTED",
+        DEAR_NO_INTRINSICS => c"DEAR_NO_INTRINSICS",
         DEAR_PANIC => c"DEAR_PANIC",
     };
     name.as_ptr()
@@ -760,6 +894,7 @@ mod tests {
             DEAR_BAD_FRAME,
             DEAR_TOO_MANY_FRAMES_HELD,
             DEAR_INTERRUPTED,
+            DEAR_NO_INTRINSICS,
             DEAR_PANIC,
         ] {
             // SAFETY: a static NUL-terminated string.

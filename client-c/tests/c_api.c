@@ -5,10 +5,13 @@
  *     c_api arguments BAD_SERVICE    NULL arguments, a bad service name (no daemon needed)
  *     c_api timeout SERVICE          no publisher: DEAR_TIMEOUT, naming the service
  *     c_api frames SERVICE           a running deard: planes, header, the held-frames limit
+ *     c_api points SERVICE           a running deard: the point cloud of a frame (format 3's
+ *                                    intrinsics), checked point by point against the header
  *
  * Prints "ok <check>" per check; on the first failed check prints "FAIL ..." and exits 1.
  */
 #include <inttypes.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -78,7 +81,12 @@ static void arguments(const char *bad_service) {
 
     CHECK(strcmp(dear_status_name(DEAR_TOO_MANY_FRAMES_HELD), "DEAR_TOO_MANY_FRAMES_HELD") == 0,
           "status names");
-    CHECK(sizeof(dear_header) == 192, "the header is the protocol's 192 bytes");
+    CHECK(sizeof(dear_header) == DEAR_HEADER_SIZE && DEAR_HEADER_SIZE == 256,
+          "the header is the protocol's 256 bytes");
+    CHECK(strcmp(dear_status_name(DEAR_NO_INTRINSICS), "DEAR_NO_INTRINSICS") == 0, "names");
+    CHECK(dear_frame_point_cloud(NULL, NULL, 0, NULL, 0) == DEAR_INVALID_ARGUMENT,
+          "no point cloud of no frame");
+    CHECK(mentions("dear_frame_point_cloud") && mentions("frame"), "names function, argument");
     ok("status names, header size");
 }
 
@@ -103,6 +111,7 @@ static void check_frame(const dear_frame *frame) {
               h->confidence_offset == 7 * pixels && h->payload_size == 8 * pixels,
           "offsets of a %" PRIu32 "x%" PRIu32 " frame", h->width, h->height);
     CHECK(h->run_id != 0, "deard draws a run id");
+    CHECK(h->depth_unit_m == DEAR_DEPTH_UNIT_M, "depth in metres");
     CHECK(h->calib_health <= DEAR_CALIB_HEALTH_NEEDS_RECALIBRATION && h->calib_constrained <= 4,
           "calibration health %u, %u directions", h->calib_health, h->calib_constrained);
     size_t n_depth = 0, n_rgb = 0, n_conf = 0;
@@ -161,9 +170,72 @@ static void frames(const char *service) {
     ok("frames released after their client");
 }
 
+static void points(const char *service) {
+    dear_client *client = NULL;
+    EXPECT_STATUS(dear_client_connect(service, &client), DEAR_OK);
+    dear_frame *frame = NULL;
+    EXPECT_STATUS(dear_client_wait(client, 20000, &frame), DEAR_OK);
+    const dear_header *h = dear_frame_header(frame);
+    CHECK(h->rgb_camera_model == DEAR_CAMERA_MODEL_PINHOLE, "a replay's camera is a pinhole");
+    printf("intrinsics %u %.6f %.6f %.6f %.6f\n", (unsigned)h->rgb_camera_model,
+           (double)h->rgb_fx, (double)h->rgb_fy, (double)h->rgb_cx, (double)h->rgb_cy);
+    size_t pixels = (size_t)h->width * h->height;
+    float *xyz = malloc(3 * pixels * sizeof(float));
+    uint8_t *valid = malloc(pixels);
+    CHECK(xyz && valid, "memory");
+
+    /* Wrong lengths and NULLs are refused by name, nothing written. */
+    EXPECT_STATUS(dear_frame_point_cloud(frame, xyz, 3 * pixels - 1, valid, pixels),
+                  DEAR_INVALID_ARGUMENT);
+    CHECK(mentions("xyz_len") && mentions("needs"), "the message names xyz_len");
+    EXPECT_STATUS(dear_frame_point_cloud(frame, xyz, 3 * pixels, valid, pixels + 1),
+                  DEAR_INVALID_ARGUMENT);
+    CHECK(mentions("valid_len"), "the message names valid_len");
+    EXPECT_STATUS(dear_frame_point_cloud(frame, NULL, 3 * pixels, valid, pixels),
+                  DEAR_INVALID_ARGUMENT);
+    CHECK(mentions("xyz"), "the message names xyz");
+
+    memset(valid, 7, pixels);
+    EXPECT_STATUS(dear_frame_point_cloud(frame, xyz, 3 * pixels, valid, pixels), DEAR_OK);
+    const float *depth = dear_frame_depth(frame, NULL);
+    size_t n_valid = 0, n_invalid = 0;
+    for (uint32_t v = 0; v < h->height; v++) {
+        for (uint32_t u = 0; u < h->width; u++) {
+            size_t i = (size_t)v * h->width + u;
+            float z = depth[i];
+            const float *p = xyz + 3 * i;
+            if (z > 0.0f && isfinite(z)) {
+                float x = ((float)u - h->rgb_cx) * z / h->rgb_fx;
+                float y = ((float)v - h->rgb_cy) * z / h->rgb_fy;
+                CHECK(valid[i] == 1, "pixel (%u, %u) with depth %f is valid", u, v, (double)z);
+                CHECK(fabsf(p[0] - x) <= 1e-5f * fmaxf(1.0f, fabsf(x)) &&
+                          fabsf(p[1] - y) <= 1e-5f * fmaxf(1.0f, fabsf(y)) && p[2] == z,
+                      "pixel (%u, %u): (%f, %f, %f), expected (%f, %f, %f)", u, v,
+                      (double)p[0], (double)p[1], (double)p[2], (double)x, (double)y,
+                      (double)z);
+                n_valid++;
+            } else {
+                CHECK(valid[i] == 0, "pixel (%u, %u) without depth is not valid", u, v);
+                CHECK(isnan(p[0]) && isnan(p[1]) && isnan(p[2]),
+                      "pixel (%u, %u) without depth is NaN, not a point", u, v);
+                n_invalid++;
+            }
+        }
+    }
+    CHECK(n_valid > 0 && n_invalid > 0, "%zu valid and %zu invalid pixels", n_valid, n_invalid);
+    /* Without a mask the NaNs tell the same. */
+    EXPECT_STATUS(dear_frame_point_cloud(frame, xyz, 3 * pixels, NULL, 0), DEAR_OK);
+    printf("points valid=%zu invalid=%zu\n", n_valid, n_invalid);
+    free(xyz);
+    free(valid);
+    dear_frame_release(frame);
+    dear_client_free(client);
+    ok("point cloud: every pixel's point from the header's intrinsics, invalid depth masked");
+}
+
 int main(int argc, char **argv) {
     if (argc != 3) {
-        fprintf(stderr, "usage: %s arguments|timeout|frames SERVICE\n", argv[0]);
+        fprintf(stderr, "usage: %s arguments|timeout|frames|points SERVICE\n", argv[0]);
         return 2;
     }
     if (strcmp(argv[1], "arguments") == 0) {
@@ -172,6 +244,8 @@ int main(int argc, char **argv) {
         timeout(argv[2]);
     } else if (strcmp(argv[1], "frames") == 0) {
         frames(argv[2]);
+    } else if (strcmp(argv[1], "points") == 0) {
+        points(argv[2]);
     } else {
         fprintf(stderr, "unknown mode %s\n", argv[1]);
         return 2;

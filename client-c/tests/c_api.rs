@@ -368,6 +368,42 @@ fn without_a_daemon_waiting_times_out() {
     assert!(output.stdout.is_empty(), "{}", describe(&output));
 }
 
+/// Format 3: a real deard frame's point cloud from C, through the Rust SDK's math: each point
+/// checked in C against the header's intrinsics, which must be the replayed capture's.
+#[test]
+fn a_point_cloud_from_c_uses_the_captures_intrinsics() {
+    iox2_root();
+    let c_api = c_program("tests/c_api.c");
+    let service = unique_service("points");
+    let daemon = start_daemon(&service);
+    let output = run(&c_api, &["points", &service]);
+    assert!(
+        output.status.success(),
+        "{}\ndeard log:\n{}",
+        describe(&output),
+        daemon.log_text()
+    );
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(stdout.contains("ok point cloud"), "{stdout}");
+    let manifest = std::fs::read_to_string(demo_capture().join("capture.json")).unwrap();
+    let k = dear_capture::CaptureManifest::from_json(&manifest)
+        .unwrap()
+        .intrinsics;
+    let line = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("intrinsics "))
+        .expect("the intrinsics line");
+    let values: Vec<f64> = line.split(' ').map(|v| v.parse().unwrap()).collect();
+    assert_eq!(values[0], 1.0, "pinhole");
+    let want = [("fx", k.fx), ("fy", k.fy), ("cx", k.cx), ("cy", k.cy)];
+    for (got, (name, want)) in values[1..].iter().zip(want) {
+        assert!(
+            (got - f64::from(want)).abs() < 1e-4,
+            "header {name} {got}, capture.json {want}"
+        );
+    }
+}
+
 #[test]
 fn frames_are_zero_copy_and_at_most_two_are_held() {
     iox2_root();

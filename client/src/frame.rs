@@ -20,7 +20,7 @@ impl std::fmt::Debug for Frame {
 }
 
 /// Why a received sample is not a usable frame.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FrameError {
     /// The header is corrupt, of another protocol version, or does not fit the payload (its
     /// message names the field).

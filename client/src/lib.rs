@@ -15,12 +15,17 @@
 //! [`dear_proto::service::QOS_SUBSCRIBER_BORROWED`] frames at once).
 
 pub mod frame;
+pub mod points;
 #[cfg(feature = "images")]
 pub mod save;
 pub mod sequence;
 pub mod subscriber;
 
-pub use dear_proto::{confidence, default_service_name, flags, FrameHeader, HeaderError, Stage};
+pub use dear_proto::{
+    camera_model, confidence, default_service_name, flags, CameraIntrinsics, FrameHeader,
+    HeaderError, IntrinsicsError, Stage,
+};
 pub use frame::{Frame, FrameError};
+pub use points::{PointCloud, PointCloudError, PointCloudOptions, Rays};
 pub use sequence::{SequenceStep, SequenceTracker};
 pub use subscriber::{Client, ClientError, ConnectError, ReceiveError};

@@ -112,6 +112,12 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
     };
     let service = config.service.service_name();
     let source_description = source.describe();
+    // The RGB camera's intrinsics, in every header (format 3); model 0 "unknown" without them.
+    let rgb_intrinsics = source.rgb_intrinsics();
+    match &rgb_intrinsics {
+        Some(k) => tracing::info!(fx = k.fx, fy = k.fy, cx = k.cx, cy = k.cy, distortion = ?k.distortion, "frame headers carry the RGB intrinsics"),
+        None => tracing::warn!("the source gives no RGB intrinsics: frame headers say \"unknown\" (rgb_camera_model 0) and clients cannot make point clouds"),
+    }
     tracing::info!(source = %source_description, %service, width, height, ?calibration, bundle = ?config.pipeline.bundle, refine = ?config.pipeline.refine, "starting");
 
     // The transport's files (frames included) live in its root directory: made (or checked
@@ -186,6 +192,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
                 header.stage_latency_us[Stage::Capture as usize] = decode_us;
                 header.frames_skipped = path.stats.skipped;
                 header.frames_dropped = queue.dropped();
+                header.set_intrinsics(rgb_intrinsics.as_ref());
                 let next = Incoming {
                     frame,
                     header,

@@ -5,10 +5,18 @@ use iceoryx2::prelude::ZeroCopySend;
 /// `"DEAR"` read as a little-endian `u32`.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"DEAR");
 /// Bumped on any change of the header or payload layout. 2: `run_id` and `sequence` were
-/// taken from `reserved` (same size, same offsets for every older field).
-pub const FORMAT_VERSION: u32 = 2;
+/// taken from `reserved` (same size, same offsets for every older field). 3: the RGB camera's
+/// intrinsics and the depth unit (`rgb_camera_model` … `rgb_distortion`, `depth_unit_m`) in
+/// place of the 6 `reserved` bytes and 64 new ones: the header grew from 192 to 256 bytes,
+/// every older field at its offset.
+pub const FORMAT_VERSION: u32 = 3;
+/// Bytes of [`FrameHeader`] (the iceoryx2 user header's size; a service made with a header of
+/// another size is of another format and cannot be opened: [`crate::FrameServiceError`]).
+pub const HEADER_SIZE: usize = 256;
+/// [`FrameHeader::depth_unit_m`]: the depth plane is `f32` metres.
+pub const DEPTH_UNIT_M: f32 = 1.0;
 /// Alignment of the payload's start in shared memory: 8, because iceoryx2 places the payload
-/// right after the 8-aligned, 192-byte user header (and aligns every chunk to 8). Enough for
+/// right after the 8-aligned, 256-byte user header (and aligns every chunk to 8). Enough for
 /// the `f32` depth plane. It is *not* passed to iceoryx2 as the payload alignment: iceoryx2
 /// pads every element of a slice payload to that alignment, so a `[u8]` payload aligned to 64
 /// took 64 bytes per byte (a 1.4 GB sparse data file for a 320×240 stream).
@@ -44,6 +52,18 @@ pub mod flags {
     /// predicted each pixel's absolute depth error, `1 mm · 2^((255 − v)/16)`. Without this
     /// flag the confidence is the heuristic support × agreement score.
     pub const CONFIDENCE_EXPECTED_ERROR: u32 = 1 << 6;
+}
+
+/// [`FrameHeader::rgb_camera_model`]: which camera model the `rgb_*` intrinsics fields hold.
+pub mod camera_model {
+    /// No intrinsics known: `rgb_fx` … `rgb_distortion` are zero and mean nothing. A frame
+    /// never carries made-up numbers: a client that needs intrinsics must get them elsewhere.
+    pub const UNKNOWN: u16 = 0;
+    /// A pinhole: `rgb_fx`, `rgb_fy`, `rgb_cx`, `rgb_cy`, no distortion (`rgb_distortion` zero).
+    pub const PINHOLE: u16 = 1;
+    /// A pinhole with Brown–Conrady distortion (OpenCV's and ROS's `plumb_bob`):
+    /// `rgb_distortion` = `[k1, k2, p1, p2, k3]`.
+    pub const BROWN_CONRADY: u16 = 2;
 }
 
 /// Pipeline stages whose latency each frame reports, index into `stage_latency_us`.
@@ -95,7 +115,7 @@ impl Stage {
 }
 
 /// The iceoryx2 user header of every published frame. `#[repr(C)]`, naturally aligned, no
-/// implicit padding, 192 bytes; offsets are fixed by docs/protocol.md's table and
+/// implicit padding, [`HEADER_SIZE`] (256) bytes; offsets are fixed by docs/protocol.md's table and
 /// `tests/layout.rs`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
@@ -162,11 +182,104 @@ pub struct FrameHeader {
     /// Directions of `(t_x, t_y, c_x, c_y)` the last calibration measurement's frame
     /// constrained, 0–4 (4 also when the measurement carried no observability); 0 before any.
     pub calib_constrained: u8,
+    /// Which model the RGB camera's intrinsics below are in, a [`camera_model`] code: 0
+    /// unknown (no intrinsics), 1 pinhole, 2 Brown–Conrady. Format 3.
+    pub rgb_camera_model: u16,
+    /// Metres per unit of the depth plane: [`DEPTH_UNIT_M`] (1.0, `f32` metres) in format 3;
+    /// [`FrameHeader::validate`] refuses any other value. Format 3.
+    pub depth_unit_m: f32,
+    /// The RGB camera's focal length along x, px, at the frame's `width`×`height` (the depth is
+    /// aligned to the RGB grid, so these are the depth's intrinsics too); 0 when unknown.
+    pub rgb_fx: f32,
+    /// Focal length along y, px.
+    pub rgb_fy: f32,
+    /// Principal point x, px (pixel centres at integer coordinates, as OpenCV).
+    pub rgb_cx: f32,
+    /// Principal point y, px.
+    pub rgb_cy: f32,
+    /// Brown–Conrady coefficients `[k1, k2, p1, p2, k3]` (OpenCV order) with model 2; zero
+    /// otherwise.
+    pub rgb_distortion: [f32; 5],
     /// Zero; room for additions without changing the size.
-    pub reserved: [u8; 6],
+    pub reserved: [u8; 28],
 }
 
-const _: () = assert!(core::mem::size_of::<FrameHeader>() == 192);
+const _: () = assert!(core::mem::size_of::<FrameHeader>() == HEADER_SIZE);
+
+/// The RGB camera's intrinsics a frame carries ([`FrameHeader::intrinsics`]), at the frame's
+/// size: the pinhole `fx, fy, cx, cy` in px and, when known, Brown–Conrady distortion.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraIntrinsics {
+    pub fx: f32,
+    pub fy: f32,
+    pub cx: f32,
+    pub cy: f32,
+    /// `[k1, k2, p1, p2, k3]` (OpenCV's order, ROS's `plumb_bob`); `None`: no distortion.
+    pub distortion: Option<[f32; 5]>,
+}
+
+impl CameraIntrinsics {
+    /// A pinhole without distortion.
+    pub fn pinhole(fx: f32, fy: f32, cx: f32, cy: f32) -> Self {
+        CameraIntrinsics {
+            fx,
+            fy,
+            cx,
+            cy,
+            distortion: None,
+        }
+    }
+
+    /// Checks that the numbers can be used: focal lengths positive and finite, the rest
+    /// finite. The message names the header field (`rgb_fx`, `rgb_distortion[2]`, …).
+    pub fn check(&self) -> Result<(), IntrinsicsError> {
+        for (field, value) in [("rgb_fx", self.fx), ("rgb_fy", self.fy)] {
+            if !(value > 0.0 && value.is_finite()) {
+                return Err(IntrinsicsError::Value {
+                    field: field.to_string(),
+                    value,
+                    expected: "a positive finite focal length in px",
+                });
+            }
+        }
+        for (field, value) in [("rgb_cx", self.cx), ("rgb_cy", self.cy)] {
+            if !value.is_finite() {
+                return Err(IntrinsicsError::Value {
+                    field: field.to_string(),
+                    value,
+                    expected: "a finite principal point in px",
+                });
+            }
+        }
+        for (i, &value) in self.distortion.iter().flatten().enumerate() {
+            if !value.is_finite() {
+                return Err(IntrinsicsError::Value {
+                    field: format!("rgb_distortion[{i}]"),
+                    value,
+                    expected: "a finite distortion coefficient",
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Why a frame's intrinsics cannot be used ([`FrameHeader::intrinsics`]); every message names
+/// the header field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum IntrinsicsError {
+    #[error(
+        "`rgb_camera_model` is {found}: not a camera model of frame format {FORMAT_VERSION} \
+         (0 unknown, 1 pinhole, 2 Brown–Conrady)"
+    )]
+    Model { found: u16 },
+    #[error("`{field}` is {value}, expected {expected}")]
+    Value {
+        field: String,
+        value: f32,
+        expected: &'static str,
+    },
+}
 
 impl Default for FrameHeader {
     /// An empty 0×0 frame with magic and version set (iceoryx2 initialises loaned headers with
@@ -225,7 +338,14 @@ impl FrameHeader {
             sequence: 0,
             calib_health: 0,
             calib_constrained: 0,
-            reserved: [0; 6],
+            rgb_camera_model: camera_model::UNKNOWN,
+            depth_unit_m: DEPTH_UNIT_M,
+            rgb_fx: 0.0,
+            rgb_fy: 0.0,
+            rgb_cx: 0.0,
+            rgb_cy: 0.0,
+            rgb_distortion: [0.0; 5],
+            reserved: [0; 28],
         })
     }
 
@@ -254,13 +374,54 @@ impl FrameHeader {
         crate::CalibrationHealth::from_code(self.calib_health)
     }
 
+    /// The RGB camera's intrinsics at the frame's size: `Ok(None)` when the publisher knows
+    /// none (`rgb_camera_model` 0), an error naming the field when the numbers cannot be used.
+    pub fn intrinsics(&self) -> Result<Option<CameraIntrinsics>, IntrinsicsError> {
+        let distortion = match self.rgb_camera_model {
+            camera_model::UNKNOWN => return Ok(None),
+            camera_model::PINHOLE => None,
+            camera_model::BROWN_CONRADY => Some(self.rgb_distortion),
+            found => return Err(IntrinsicsError::Model { found }),
+        };
+        let k = CameraIntrinsics {
+            fx: self.rgb_fx,
+            fy: self.rgb_fy,
+            cx: self.rgb_cx,
+            cy: self.rgb_cy,
+            distortion,
+        };
+        k.check()?;
+        Ok(Some(k))
+    }
+
+    /// Sets the intrinsics fields (`None`: model 0, "unknown", every field zero).
+    pub fn set_intrinsics(&mut self, intrinsics: Option<&CameraIntrinsics>) {
+        let Some(k) = intrinsics else {
+            self.rgb_camera_model = camera_model::UNKNOWN;
+            (self.rgb_fx, self.rgb_fy, self.rgb_cx, self.rgb_cy) = (0.0, 0.0, 0.0, 0.0);
+            self.rgb_distortion = [0.0; 5];
+            return;
+        };
+        (self.rgb_fx, self.rgb_fy, self.rgb_cx, self.rgb_cy) = (k.fx, k.fy, k.cx, k.cy);
+        match k.distortion {
+            Some(d) => {
+                self.rgb_camera_model = camera_model::BROWN_CONRADY;
+                self.rgb_distortion = d;
+            }
+            None => {
+                self.rgb_camera_model = camera_model::PINHOLE;
+                self.rgb_distortion = [0.0; 5];
+            }
+        }
+    }
+
     /// Latency of one stage in µs.
     pub fn latency_us(&self, stage: Stage) -> u32 {
         self.stage_latency_us[stage as usize]
     }
 
     /// Checks a received header against its payload before anything reads the payload: the
-    /// magic, the format version, that the frame size fits the protocol, that every plane
+    /// magic, the format version, the depth unit (metres), that the frame size fits the protocol, that every plane
     /// offset and `payload_size` are the ones [`PayloadLayout::new`] gives for `width`×`height`
     /// (so the planes lie inside `payload_size`, in order, without overlapping), and that the
     /// payload holds `payload_size` bytes. Never panics, whatever the header's bytes are: the
@@ -273,6 +434,11 @@ impl FrameHeader {
             return Err(HeaderError::Version {
                 found: self.version,
                 supported: FORMAT_VERSION,
+            });
+        }
+        if self.depth_unit_m != DEPTH_UNIT_M {
+            return Err(HeaderError::DepthUnit {
+                found: self.depth_unit_m,
             });
         }
         let layout = PayloadLayout::new(self.width, self.height)?;
@@ -336,7 +502,7 @@ pub fn random_run_id() -> std::io::Result<u64> {
 
 /// Why a received [`FrameHeader`] was refused ([`FrameHeader::validate`]). Every message names
 /// the header field that is wrong, in backticks, with the value found and the one expected.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum HeaderError {
     #[error(
         "`magic` is {found:#010x}, expected {MAGIC:#010x} (\"DEAR\"): not a DEAR frame header"
@@ -349,6 +515,12 @@ pub enum HeaderError {
          reads version {supported} only (update the older of the two)"
     )]
     Version { found: u32, supported: u32 },
+    /// The depth plane is not in metres: no publisher of this format sends that.
+    #[error(
+        "`depth_unit_m` is {found}, expected {DEPTH_UNIT_M} (the depth plane is f32 metres in \
+         frame format {FORMAT_VERSION})"
+    )]
+    DepthUnit { found: f32 },
     /// `width`×`height` needs a payload larger than the header can describe.
     #[error(transparent)]
     Size(#[from] LayoutError),

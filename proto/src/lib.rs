@@ -22,8 +22,9 @@ pub mod time;
 pub mod transport;
 
 pub use header::{
-    flags, random_run_id, FrameHeader, HeaderError, LayoutError, PayloadLayout, Stage,
-    FORMAT_VERSION, MAGIC, PAYLOAD_ALIGNMENT,
+    camera_model, flags, random_run_id, CameraIntrinsics, FrameHeader, HeaderError,
+    IntrinsicsError, LayoutError, PayloadLayout, Stage, DEPTH_UNIT_M, FORMAT_VERSION, HEADER_SIZE,
+    MAGIC, PAYLOAD_ALIGNMENT,
 };
 pub use health::CalibrationHealth;
 pub use service::{

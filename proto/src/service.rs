@@ -11,10 +11,12 @@
 
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::event::EventOpenOrCreateError;
-use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
-use crate::header::FrameHeader;
+use crate::header::{FrameHeader, FORMAT_VERSION, HEADER_SIZE};
 use crate::transport::Transport;
 
 /// Frames queued per subscriber before the oldest is overwritten.
@@ -74,8 +76,20 @@ pub type ServiceNameRejected = iceoryx2::service::service_name::ServiceNameError
 pub enum FrameServiceError {
     #[error(transparent)]
     Name(#[from] ServiceNameError),
-    /// Typically: the service exists with other QoS or another header type (a client or
-    /// daemon of another protocol version), or the shared memory is not accessible.
+    /// The service exists with another user header or payload type: made by a daemon or
+    /// client of another frame format (format 2's header had 192 bytes, format 3's 256).
+    #[error(
+        "cannot open the frame service {name:?}: it exists with another frame header type, so \
+         the process that made it (a deard or client still running) speaks another frame format \
+         than this one's format {FORMAT_VERSION} (`DearFrameHeader` of {HEADER_SIZE} bytes; \
+         format 2 had 192): update the older of the two (docs/protocol.md, \"Frame layout\")"
+    )]
+    OtherFormat {
+        name: String,
+        #[source]
+        source: PublishSubscribeOpenOrCreateError,
+    },
+    /// Typically: the service exists with other QoS, or the shared memory is not accessible.
     #[error("cannot open or create the frame service {name:?} (if it exists, another process made it with other QoS or types than this protocol's: docs/protocol.md, \"Frame layout\")")]
     OpenOrCreate {
         name: String,
@@ -147,9 +161,14 @@ pub fn frame_service(
         .max_publishers(QOS_MAX_PUBLISHERS)
         .max_nodes(QOS_MAX_NODES)
         .open_or_create()
-        .map_err(|source| FrameServiceError::OpenOrCreate {
-            name: name.to_string(),
-            source,
+        .map_err(|source| {
+            let name = name.to_string();
+            match source {
+                PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                    PublishSubscribeOpenError::IncompatibleTypes,
+                ) => FrameServiceError::OtherFormat { name, source },
+                source => FrameServiceError::OpenOrCreate { name, source },
+            }
         })
 }
 

@@ -5,7 +5,7 @@
 //! - neither function panics, on any input (a corrupt header must not crash a client);
 //! - `validate` accepts exactly the well-formed headers, and every header `FrameHeader::new`
 //!   makes (whatever the fields that do not describe the layout hold) is accepted, also after a
-//!   round trip through its 192 bytes;
+//!   round trip through its 256 bytes;
 //! - every rejection is the first failing check of the reference and its message names the
 //!   offending field in backticks.
 //!
@@ -30,7 +30,7 @@ fn from_bytes(bytes: &[u8; HEADER_BYTES]) -> FrameHeader {
 
 fn to_bytes(header: &FrameHeader) -> [u8; HEADER_BYTES] {
     // SAFETY: the header has no padding (tests/layout.rs checks the fields are contiguous), so
-    // all 192 bytes are initialised.
+    // all 256 bytes are initialised.
     unsafe { std::ptr::read_unaligned((header as *const FrameHeader).cast::<[u8; HEADER_BYTES]>()) }
 }
 
@@ -46,8 +46,12 @@ fn reference(h: &FrameHeader, payload_len: usize) -> Verdict {
     if h.magic != u32::from_le_bytes(*b"DEAR") {
         return Verdict::Rejected("magic");
     }
-    if h.version != 2 {
+    if h.version != 3 {
         return Verdict::Rejected("version");
+    }
+    // `validate` compares with 1.0, which no other bit pattern equals (NaN included).
+    if h.depth_unit_m.to_bits() != 1.0f32.to_bits() {
+        return Verdict::Rejected("depth_unit_m");
     }
     let pixels = u128::from(h.width) * u128::from(h.height);
     let size = 8 * pixels;
@@ -99,6 +103,9 @@ fn check(h: &FrameHeader, payload_len: usize) -> Result<(), TestCaseError> {
                 (HeaderError::Version { found, supported }, "version") => {
                     *found == h.version && *supported == FORMAT_VERSION
                 }
+                (HeaderError::DepthUnit { found }, "depth_unit_m") => {
+                    found.to_bits() == h.depth_unit_m.to_bits()
+                }
                 (HeaderError::Size(e), "width") => (e.width, e.height) == (h.width, h.height),
                 (HeaderError::Layout { field: f, .. }, _) => *f == field,
                 (HeaderError::PayloadTooShort { len, .. }, "payload_size") => *len == payload_len,
@@ -147,12 +154,17 @@ fn mutated_header() -> impl Strategy<Value = (FrameHeader, usize)> {
         proptest::option::weighted(0.15, any::<u32>()),
         proptest::option::weighted(0.15, any::<u32>()),
         proptest::option::weighted(0.2, 0usize..=1),
+        proptest::option::weighted(
+            0.1,
+            prop_oneof![Just(0.001f32), Just(f32::NAN), any::<f32>()],
+        ),
     )
         .prop_map(
-            |((w, hgt), noise, extra, magic, version, d, r, c, p, short)| {
+            |((w, hgt), noise, extra, magic, version, d, r, c, p, short, unit)| {
                 let mut h = from_bytes(&noise);
                 h.magic = MAGIC;
                 h.version = FORMAT_VERSION;
+                h.depth_unit_m = unit.unwrap_or(1.0);
                 h.width = w;
                 h.height = hgt;
                 let size = match PayloadLayout::new(w, hgt) {
@@ -193,7 +205,7 @@ fn mutated_header() -> impl Strategy<Value = (FrameHeader, usize)> {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(CASES))]
 
-    /// Any 192 bytes and any payload length: no panic, the reference's verdict.
+    /// Any 256 bytes and any payload length: no panic, the reference's verdict.
     #[test]
     fn arbitrary_header_bytes(bytes in any::<[u8; HEADER_BYTES]>(), len in any::<usize>()) {
         check(&from_bytes(&bytes), len)?;

@@ -4,7 +4,10 @@
 
 use std::mem::{offset_of, size_of};
 
-use dear_proto::{random_run_id, FrameHeader, HeaderError, PayloadLayout, FORMAT_VERSION};
+use dear_proto::{
+    camera_model, random_run_id, CameraIntrinsics, FrameHeader, HeaderError, IntrinsicsError,
+    PayloadLayout, FORMAT_VERSION, HEADER_SIZE,
+};
 
 /// `(field, offset, size)` of the real struct.
 fn real_fields() -> Vec<(&'static str, usize, usize)> {
@@ -46,6 +49,13 @@ fn real_fields() -> Vec<(&'static str, usize, usize)> {
         field!(sequence),
         field!(calib_health),
         field!(calib_constrained),
+        field!(rgb_camera_model),
+        field!(depth_unit_m),
+        field!(rgb_fx),
+        field!(rgb_fy),
+        field!(rgb_cx),
+        field!(rgb_cy),
+        field!(rgb_distortion),
         field!(reserved),
     ]
 }
@@ -114,11 +124,12 @@ fn fields_are_contiguous_without_padding() {
     }
 }
 
-/// Offsets of the version-2 fields, fixed by the protocol: a client in another language reads
-/// them at these bytes, so moving them is a format change (and a `FORMAT_VERSION` bump).
+/// Offsets of the fields added since version 1, fixed by the protocol: a client in another
+/// language reads them at these bytes, so moving them is a format change (and a
+/// `FORMAT_VERSION` bump). Format 3 kept every format-2 field where it was.
 #[test]
-fn version_2_fields_sit_where_reserved_was() {
-    assert_eq!(FORMAT_VERSION, 2);
+fn newer_fields_sit_where_the_protocol_puts_them() {
+    assert_eq!(FORMAT_VERSION, 3);
     assert_eq!(
         offset_of!(FrameHeader, frames_dropped),
         160,
@@ -130,15 +141,82 @@ fn version_2_fields_sit_where_reserved_was() {
     // (0 = unknown, what an older publisher sends).
     assert_eq!(offset_of!(FrameHeader, calib_health), 184);
     assert_eq!(offset_of!(FrameHeader, calib_constrained), 185);
-    assert_eq!(offset_of!(FrameHeader, reserved), 186);
-    assert_eq!(size_of::<FrameHeader>(), 192, "the header keeps its size");
+    // Format 3 (issue 35): the RGB camera's intrinsics and the depth unit.
+    assert_eq!(offset_of!(FrameHeader, rgb_camera_model), 186);
+    assert_eq!(offset_of!(FrameHeader, depth_unit_m), 188);
+    assert_eq!(offset_of!(FrameHeader, rgb_fx), 192);
+    assert_eq!(offset_of!(FrameHeader, rgb_cy), 204);
+    assert_eq!(offset_of!(FrameHeader, rgb_distortion), 208);
+    assert_eq!(offset_of!(FrameHeader, reserved), 228);
+    assert_eq!(size_of::<FrameHeader>(), 256);
+    assert_eq!(HEADER_SIZE, 256);
     let h = FrameHeader::new(7, 4, 3);
-    assert_eq!((h.run_id, h.sequence, h.reserved), (0, 0, [0; 6]));
+    assert_eq!((h.run_id, h.sequence, h.reserved), (0, 0, [0; 28]));
     assert_eq!((h.calib_health, h.calib_constrained), (0, 0));
     assert_eq!(
         h.calibration_health(),
         dear_proto::CalibrationHealth::Unknown
     );
+    // A new header knows no intrinsics and says so; its depth is in metres.
+    assert_eq!(h.rgb_camera_model, camera_model::UNKNOWN);
+    assert_eq!(h.intrinsics(), Ok(None));
+    assert_eq!(h.depth_unit_m, 1.0);
+}
+
+#[test]
+fn intrinsics_round_trip_and_bad_ones_are_named() {
+    let mut h = FrameHeader::new(1, 640, 480);
+    let pinhole = CameraIntrinsics::pinhole(500.0, 510.0, 319.5, 239.5);
+    h.set_intrinsics(Some(&pinhole));
+    assert_eq!(h.rgb_camera_model, camera_model::PINHOLE);
+    assert_eq!(h.intrinsics(), Ok(Some(pinhole)));
+    let distorted = CameraIntrinsics {
+        distortion: Some([0.1, -0.05, 0.001, -0.002, 0.01]),
+        ..pinhole
+    };
+    h.set_intrinsics(Some(&distorted));
+    assert_eq!(h.rgb_camera_model, camera_model::BROWN_CONRADY);
+    assert_eq!(h.rgb_distortion, [0.1, -0.05, 0.001, -0.002, 0.01]);
+    assert_eq!(h.intrinsics(), Ok(Some(distorted)));
+    h.set_intrinsics(None);
+    assert_eq!(
+        (h.rgb_camera_model, h.rgb_fx, h.rgb_distortion),
+        (0, 0.0, [0.0; 5])
+    );
+    assert_eq!(h.intrinsics(), Ok(None));
+
+    let mut bad = FrameHeader::new(1, 640, 480);
+    bad.set_intrinsics(Some(&distorted));
+    bad.rgb_camera_model = 9;
+    let err = bad.intrinsics().unwrap_err();
+    assert_eq!(err, IntrinsicsError::Model { found: 9 });
+    assert!(err.to_string().contains("`rgb_camera_model` is 9"), "{err}");
+    for (field, spoil) in [
+        (
+            "`rgb_fx`",
+            (|h: &mut FrameHeader| h.rgb_fx = 0.0) as fn(&mut FrameHeader),
+        ),
+        ("`rgb_fy`", |h| h.rgb_fy = f32::NAN),
+        ("`rgb_cy`", |h| h.rgb_cy = f32::INFINITY),
+        ("`rgb_distortion[3]`", |h| h.rgb_distortion[3] = f32::NAN),
+    ] {
+        let mut h = FrameHeader::new(1, 640, 480);
+        h.set_intrinsics(Some(&distorted));
+        spoil(&mut h);
+        let msg = h.intrinsics().unwrap_err().to_string();
+        assert!(msg.contains(field), "{field} not named in {msg}");
+        // The layout is still fine: the frame is received, only its intrinsics are refused.
+        assert!(h.validate(8 * 640 * 480).is_ok());
+    }
+}
+
+#[test]
+fn a_depth_unit_other_than_metres_is_refused() {
+    let mut h = FrameHeader::new(1, 4, 3);
+    h.depth_unit_m = 0.001;
+    let err = h.validate(96).unwrap_err();
+    assert_eq!(err, HeaderError::DepthUnit { found: 0.001 });
+    assert!(err.to_string().contains("`depth_unit_m` is 0.001"), "{err}");
 }
 
 #[test]
@@ -198,12 +276,19 @@ fn another_format_version_is_refused_naming_both_versions() {
         err,
         HeaderError::Version {
             found: 1,
-            supported: 2
+            supported: 3
         }
     );
     let msg = err.to_string();
     assert!(
-        msg.contains("version 1") && msg.contains("version 2"),
+        msg.contains("version 1") && msg.contains("version 3"),
+        "{msg}"
+    );
+    // A format-2 header (192 bytes, read at format 3's size) says version 2 in the same bytes.
+    h.version = 2;
+    let msg = h.validate(96).unwrap_err().to_string();
+    assert!(
+        msg.contains("version 2") && msg.contains("version 3"),
         "{msg}"
     );
 }

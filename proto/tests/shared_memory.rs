@@ -53,7 +53,7 @@ fn the_data_segment_holds_the_protocols_samples_and_payloads_are_aligned() {
         .iter()
         .filter_map(|p| std::fs::metadata(p).ok().map(|m| m.len()))
         .collect();
-    // Per sample iceoryx2 adds its own header and our 192-byte one: allow 1 KiB a sample.
+    // Per sample iceoryx2 adds its own header and our 256-byte one: allow 1 KiB a sample.
     let slack = (samples_in_shared_memory() * 1024) as u64;
     assert!(
         sizes.iter().any(|&s| s >= want && s <= want + slack),

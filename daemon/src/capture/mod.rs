@@ -18,6 +18,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use dear_capture::{Calibration, CaptureManifest, RgbdFrame};
+use dear_proto::CameraIntrinsics;
 
 /// Metres per second.
 const SPEED_OF_LIGHT: f64 = 299_792_458.0;
@@ -56,6 +57,9 @@ pub trait FrameSource: Send {
     fn recording_manifest(&self) -> CaptureManifest;
     /// The farthest depth this stream's module measures, if known.
     fn depth_limit(&self) -> Option<DepthLimit>;
+    /// The RGB camera's intrinsics at [`size`](Self::size) (the grid every published frame is
+    /// on), for the frame header (format 3); `None` when the source knows none.
+    fn rgb_intrinsics(&self) -> Option<CameraIntrinsics>;
 }
 
 /// The farthest z-depth a module measures. A single-frequency ToF module cannot tell a

@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 
 use dear_capture::{Calibration, Intrinsics};
 use dear_pipeline::geometry::register::Registration;
+use dear_proto::CameraIntrinsics;
 use serde::{Deserialize, Serialize};
 
 /// The file as written.
@@ -38,7 +39,8 @@ fn default_depth_scale() -> f32 {
     0.001
 }
 
-/// One camera: its image size and pinhole intrinsics (pixel centres at integer coordinates).
+/// One camera: its image size and pinhole intrinsics (pixel centres at integer coordinates),
+/// and for the RGB camera optionally its lens distortion.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
@@ -48,6 +50,11 @@ pub struct Camera {
     pub fy: f32,
     pub cx: f32,
     pub cy: f32,
+    /// Brown–Conrady `[k1, k2, p1, p2, k3]` (OpenCV's order; `rs-enumerate-devices -c` and
+    /// OpenCV's calibrateCamera give them so). Only `[rgb]` may have it: deard publishes it in
+    /// the frame header for clients' point clouds; the ToF image is registered as a pinhole.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distortion: Option<[f32; 5]>,
 }
 
 impl Camera {
@@ -147,6 +154,23 @@ impl ModuleCalibration {
                 }
             }
         }
+        if self.tof.distortion.is_some() {
+            return Err(
+                "[tof] distortion is not used: deard registers the ToF image as a \
+                 pinhole (give the rectified camera's fx, fy, cx, cy); only [rgb] may have \
+                 distortion"
+                    .into(),
+            );
+        }
+        if let Some(d) = self.rgb.distortion {
+            if let Some((i, k)) = d.iter().enumerate().find(|(_, k)| !k.is_finite()) {
+                let name = ["k1", "k2", "p1", "p2", "k3"][i];
+                return Err(format!(
+                    "[rgb] distortion[{i}] ({name}) = {k} must be finite: distortion = [k1, k2, \
+                     p1, p2, k3], Brown–Conrady in OpenCV's order"
+                ));
+            }
+        }
         let r = &self.extrinsics.rotation;
         if r.iter().flatten().any(|v| !v.is_finite()) {
             return Err("[extrinsics] rotation must be finite".into());
@@ -179,6 +203,16 @@ impl ModuleCalibration {
             }
         }
         Ok(())
+    }
+
+    /// The RGB camera's intrinsics as the frame header carries them: the pinhole, and the
+    /// Brown–Conrady distortion when the file gives one.
+    pub fn rgb_intrinsics(&self) -> CameraIntrinsics {
+        let r = &self.rgb;
+        CameraIntrinsics {
+            distortion: r.distortion,
+            ..CameraIntrinsics::pinhole(r.fx, r.fy, r.cx, r.cy)
+        }
     }
 
     /// The rotation and intrinsics registration of ToF frames onto the RGB grid.
@@ -224,6 +258,30 @@ mod tests {
         assert_eq!(cal.depth_scale_m, 0.001);
         assert_eq!(cal.max_range_m, Some(4.0));
         assert!(cal.initial_calibration().tx.is_finite());
+    }
+
+    #[test]
+    fn the_rgb_intrinsics_and_distortion_are_what_the_header_carries() {
+        let cal = parse(EXAMPLE).unwrap();
+        assert_eq!(
+            cal.rgb_intrinsics(),
+            CameraIntrinsics::pinhole(457.0, 457.0, 319.5, 239.5),
+            "without distortion: a pinhole"
+        );
+        let text = EXAMPLE.replacen(
+            "# distortion = [0.1, -0.25, 0.001, -0.0005, 0.1]",
+            "distortion = [0.1, -0.25, 0.001, -0.0005, 0.1]",
+            1,
+        );
+        let k = parse(&text).unwrap().rgb_intrinsics();
+        assert_eq!(k.distortion, Some([0.1, -0.25, 0.001, -0.0005, 0.1]));
+        let mut header = dear_proto::FrameHeader::new(0, 640, 480);
+        header.set_intrinsics(Some(&k));
+        assert_eq!(
+            header.rgb_camera_model,
+            dear_proto::camera_model::BROWN_CONRADY
+        );
+        assert_eq!(header.intrinsics(), Ok(Some(k)));
     }
 
     #[test]
@@ -280,6 +338,26 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("focal"), "unknown key named: {err}");
+        // The optional [rgb] distortion: five finite numbers, and only for the RGB camera.
+        let with =
+            |line: &str, section: &str| EXAMPLE.replacen(section, &format!("{section}\n{line}"), 1);
+        for (text, says) in [
+            (
+                with("distortion = [0.1, nan, 0.0, 0.0, 0.0]", "[rgb]"),
+                "[rgb] distortion[1] (k2) = NaN must be finite",
+            ),
+            (
+                with("distortion = [0.1, 0.2, 0.0, 0.0]", "[rgb]"),
+                "distortion",
+            ),
+            (
+                with("distortion = [0.1, 0.2, 0.0, 0.0, 0.0]", "[tof]"),
+                "[tof] distortion is not used",
+            ),
+        ] {
+            let err = parse(&text).unwrap_err().to_string();
+            assert!(err.contains(says) && err.contains("module.toml"), "{err}");
+        }
         let missing = ModuleCalibration::load(Path::new("/nonexistent/module.toml"))
             .unwrap_err()
             .to_string();

@@ -17,6 +17,8 @@ use dear_capture::{
     Prefetched,
 };
 
+use dear_proto::CameraIntrinsics;
+
 use super::{sleep_unless, DepthLimit, FrameSource, SourceItem};
 use crate::config::{CaptureConfig, Pacing};
 
@@ -286,6 +288,13 @@ impl FrameSource for ReplaySource {
 
     fn depth_limit(&self) -> Option<DepthLimit> {
         DepthLimit::of_manifest(self.dir.manifest())
+    }
+
+    /// `capture.json`'s `intrinsics` (a pinhole: the capture format has no distortion), at the
+    /// manifest's size, which every frame has.
+    fn rgb_intrinsics(&self) -> Option<CameraIntrinsics> {
+        let k = self.dir.manifest().intrinsics;
+        Some(CameraIntrinsics::pinhole(k.fx, k.fy, k.cx, k.cy))
     }
 }
 

@@ -20,6 +20,7 @@ use std::time::{Duration, Instant};
 
 use dear_capture::{png::quantize_as_stored, Calibration, CaptureManifest, RgbdFrame};
 use dear_pipeline::geometry::register::{register_tof, Registration};
+use dear_proto::CameraIntrinsics;
 use dear_v4l2::device::{DeviceError, FormatRequest};
 use dear_v4l2::pair::{Pair, PairCounts, Pairer};
 use dear_v4l2::pixel::{self, phase, FrameFormat, PixelFormat};
@@ -108,6 +109,8 @@ pub struct V4lSource {
     description: String,
     /// What a recording of this module's stream says about it.
     manifest: CaptureManifest,
+    /// The calibration file's `[rgb]` intrinsics, distortion included, for the frame header.
+    rgb_intrinsics: CameraIntrinsics,
     /// The calibration file's `max_range_m` or the modulation's unambiguous range, the nearer.
     depth_limit: Option<DepthLimit>,
     stop: Arc<AtomicBool>,
@@ -299,6 +302,7 @@ impl V4lSource {
             calibration: module.initial_calibration(),
             description,
             manifest,
+            rgb_intrinsics: module.rgb_intrinsics(),
             depth_limit: DepthLimit::nearer(
                 module.max_range_m.map(|max_m| DepthLimit {
                     max_m,
@@ -708,6 +712,10 @@ impl FrameSource for V4lSource {
 
     fn depth_limit(&self) -> Option<DepthLimit> {
         self.depth_limit.clone()
+    }
+
+    fn rgb_intrinsics(&self) -> Option<CameraIntrinsics> {
+        Some(self.rgb_intrinsics)
     }
 }
 
