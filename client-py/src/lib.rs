@@ -44,6 +44,12 @@ create_exception!(
     DearError,
     "Receiving or waiting for a frame failed."
 );
+create_exception!(
+    dear,
+    PointCloudError,
+    DearError,
+    "A frame's point cloud cannot be made: it carries no (or unusable) intrinsics."
+);
 
 /// The default service of camera `cam0`.
 const DEFAULT_SERVICE: &str = "dear/cam0/frames";
@@ -96,7 +102,7 @@ struct Sample {
     _frame: dear_client::Frame,
 }
 
-/// The header of one frame (a copy of the 192-byte `DearFrameHeader`; docs/protocol.md,
+/// The header of one frame (a copy of the 256-byte `DearFrameHeader`; docs/protocol.md,
 /// "Frame layout").
 #[pyclass(frozen, module = "dear", name = "Header")]
 struct Header(FrameHeader);
@@ -108,7 +114,7 @@ impl Header {
     fn frame_id(&self) -> u64 {
         self.0.frame_id
     }
-    /// Format version of the header (2).
+    /// Format version of the header (3).
     #[getter]
     fn version(&self) -> u32 {
         self.0.version
@@ -221,6 +227,46 @@ impl Header {
     #[getter]
     fn sequence(&self) -> u64 {
         self.0.sequence
+    }
+    /// Metres per depth unit: 1.0 (the depth is float32 metres).
+    #[getter]
+    fn depth_unit_m(&self) -> f32 {
+        self.0.depth_unit_m
+    }
+    /// The header's camera model code: 0 unknown, 1 pinhole, 2 Brown–Conrady.
+    #[getter]
+    fn rgb_camera_model(&self) -> u16 {
+        self.0.rgb_camera_model
+    }
+    /// The RGB camera's intrinsics at the frame's size (the depth's too: it is aligned to the
+    /// RGB grid): `{"fx", "fy", "cx", "cy", "model", "distortion"}` with `model` `"pinhole"`
+    /// (`distortion` None) or `"brown_conrady"` (`distortion` = (k1, k2, p1, p2, k3)); None when
+    /// the publisher knows none. Raises `PointCloudError` for unusable numbers (names the field).
+    #[getter]
+    fn intrinsics<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(k) = self
+            .0
+            .intrinsics()
+            .map_err(|e| PointCloudError::new_err(e.to_string()))?
+        else {
+            return Ok(None);
+        };
+        let dict = PyDict::new(py);
+        dict.set_item("fx", k.fx)?;
+        dict.set_item("fy", k.fy)?;
+        dict.set_item("cx", k.cx)?;
+        dict.set_item("cy", k.cy)?;
+        match k.distortion {
+            None => {
+                dict.set_item("model", "pinhole")?;
+                dict.set_item("distortion", py.None())?;
+            }
+            Some(d) => {
+                dict.set_item("model", "brown_conrady")?;
+                dict.set_item("distortion", PyTuple::new(py, d)?)?;
+            }
+        }
+        Ok(Some(dict))
     }
 
     fn __repr__(&self) -> String {
@@ -358,6 +404,53 @@ impl Frame {
         }
     }
 
+    /// The frame's point cloud from its header's intrinsics, by the Rust SDK's
+    /// `dear_client::points` (pinhole, Brown–Conrady distortion undone per pixel). Organised:
+    /// one entry per pixel, row-major (`i = v·W + u`; `reshape(H, W, 3)` gives the image
+    /// layout). `points` float32 (N, 3) metres in the RGB camera's optical frame (x right, y
+    /// down, z forward), NaN where `valid` (bool (N,)) is False — no valid depth, never a point
+    /// at the origin; `colors` uint8 (N, 3) and `confidence` uint8 (N,) when asked for, else
+    /// None. `points[valid]` is the measured cloud. Copies (not views of shared memory). Raises
+    /// `PointCloudError` when the frame carries no intrinsics, ValueError after `release()`.
+    #[pyo3(signature = (*, colors = false, confidence = false))]
+    fn point_cloud(&self, py: Python<'_>, colors: bool, confidence: bool) -> PyResult<PointCloud> {
+        let p = self.planes()?;
+        let n = p.height * p.width;
+        // SAFETY: `Frame::new` took the pointers and size from the validated frame that
+        // `p.owner` holds, alive while `self` (and so `p`) is borrowed here.
+        let (depth, rgb, conf) = unsafe {
+            (
+                std::slice::from_raw_parts(p.depth, n),
+                std::slice::from_raw_parts(p.rgb, 3 * n),
+                std::slice::from_raw_parts(p.confidence, n),
+            )
+        };
+        let options = dear_client::PointCloudOptions { colors, confidence };
+        let cloud =
+            dear_client::points::point_cloud(&self.header.get().0, depth, rgb, conf, options)
+                .map_err(|e| PointCloudError::new_err(chain(&e)))?;
+        let points = ndarray::Array2::from_shape_vec((n, 3), cloud.points.into_flattened())
+            .expect("n points of 3");
+        Ok(PointCloud {
+            points: numpy::PyArray2::from_owned_array(py, points)
+                .into_any()
+                .unbind(),
+            valid: numpy::PyArray1::from_vec(py, cloud.valid)
+                .into_any()
+                .unbind(),
+            colors: cloud.colors.map(|c| {
+                let c = ndarray::Array2::from_shape_vec((n, 3), c.into_flattened())
+                    .expect("n colours of 3");
+                numpy::PyArray2::from_owned_array(py, c).into_any().unbind()
+            }),
+            confidence: cloud
+                .confidence
+                .map(|c| numpy::PyArray1::from_vec(py, c).into_any().unbind()),
+            width: p.width,
+            height: p.height,
+        })
+    }
+
     /// `(height, width)`.
     #[getter]
     fn shape(&self) -> (u32, u32) {
@@ -401,6 +494,51 @@ impl Frame {
                 ""
             }
         )
+    }
+}
+
+/// A frame's point cloud (`Frame.point_cloud`): numpy arrays owned by this object.
+#[pyclass(frozen, module = "dear", name = "PointCloud")]
+struct PointCloud {
+    /// float32 (N, 3), metres; NaN where not valid.
+    #[pyo3(get)]
+    points: Py<PyAny>,
+    /// bool (N,): the pixel has valid depth (and a ray).
+    #[pyo3(get)]
+    valid: Py<PyAny>,
+    /// uint8 (N, 3) or None.
+    #[pyo3(get)]
+    colors: Option<Py<PyAny>>,
+    /// uint8 (N,) or None.
+    #[pyo3(get)]
+    confidence: Option<Py<PyAny>>,
+    /// The frame's width: N = width·height.
+    #[pyo3(get)]
+    width: usize,
+    #[pyo3(get)]
+    height: usize,
+}
+
+#[pymethods]
+impl PointCloud {
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        let valid = self.valid.bind(py).call_method0("sum")?;
+        Ok(format!(
+            "PointCloud({}x{}, {} valid points{}{})",
+            self.width,
+            self.height,
+            valid,
+            if self.colors.is_some() {
+                ", colors"
+            } else {
+                ""
+            },
+            if self.confidence.is_some() {
+                ", confidence"
+            } else {
+                ""
+            }
+        ))
     }
 }
 
@@ -547,12 +685,20 @@ fn _dear(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Subscriber>()?;
     m.add_class::<Frame>()?;
     m.add_class::<Header>()?;
+    m.add_class::<PointCloud>()?;
+    m.add("PointCloudError", py.get_type::<PointCloudError>())?;
     m.add("DearError", py.get_type::<DearError>())?;
     m.add("ConnectError", py.get_type::<ConnectError>())?;
     m.add("ReceiveError", py.get_type::<ReceiveError>())?;
     m.add("DEFAULT_SERVICE", DEFAULT_SERVICE)?;
     m.add("MAX_BORROWED_FRAMES", QOS_SUBSCRIBER_BORROWED)?;
     m.add("FORMAT_VERSION", dear_proto::FORMAT_VERSION)?;
+    m.add("CAMERA_MODEL_UNKNOWN", dear_proto::camera_model::UNKNOWN)?;
+    m.add("CAMERA_MODEL_PINHOLE", dear_proto::camera_model::PINHOLE)?;
+    m.add(
+        "CAMERA_MODEL_BROWN_CONRADY",
+        dear_proto::camera_model::BROWN_CONRADY,
+    )?;
     use dear_client::flags;
     for (name, bit) in [
         ("FLAG_ALIGNED", flags::ALIGNED),

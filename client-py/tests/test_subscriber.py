@@ -77,6 +77,53 @@ def receive(sub: dear.Subscriber) -> dear.Frame:
     return frame
 
 
+def test_point_cloud_of_a_real_frame(service: str) -> None:
+    """Format 3: the header carries the replayed capture's intrinsics, and `point_cloud` (the
+    Rust SDK's back-projection) gives each pixel's ((u-cx)z/fx, (v-cy)z/fy, z), checked here
+    in float64 numpy, with invalid depth masked and NaN, never a point at the origin."""
+    k = json.loads((DEMO / "capture.json").read_text())["intrinsics"]
+    with dear.Subscriber(service) as sub, receive(sub) as frame:
+        h = frame.header
+        assert h.rgb_camera_model == dear.CAMERA_MODEL_PINHOLE
+        got = h.intrinsics
+        assert got is not None and got["model"] == "pinhole" and got["distortion"] is None
+        for name in ("fx", "fy", "cx", "cy"):
+            assert got[name] == pytest.approx(k[name], abs=1e-4), name
+        depth = np.array(frame.depth, dtype=np.float64)
+        rgb, conf = np.array(frame.rgb), np.array(frame.confidence)
+        bare = frame.point_cloud()
+        assert bare.colors is None and bare.confidence is None
+        cloud = frame.point_cloud(colors=True, confidence=True)
+        assert "valid points, colors, confidence" in repr(cloud)
+    n = WIDTH * HEIGHT
+    assert (cloud.width, cloud.height) == (WIDTH, HEIGHT)
+    assert cloud.points.shape == (n, 3) and cloud.points.dtype == np.float32
+    assert cloud.valid.shape == (n,) and cloud.valid.dtype == np.bool_
+    np.testing.assert_array_equal(bare.points, cloud.points)
+    valid = (depth > 0).ravel()
+    np.testing.assert_array_equal(cloud.valid, valid)
+    assert 0 < valid.sum() < n, "both valid and invalid pixels are checked"
+    v, u = np.mgrid[0:HEIGHT, 0:WIDTH]
+    z = depth.ravel()
+    want = np.stack(
+        [
+            (u.ravel() - got["cx"]) * z / got["fx"],
+            (v.ravel() - got["cy"]) * z / got["fy"],
+            z,
+        ],
+        axis=1,
+    )
+    np.testing.assert_allclose(cloud.points[valid], want[valid], rtol=1e-5, atol=1e-6)
+    assert np.isnan(cloud.points[~valid]).all()
+    np.testing.assert_array_equal(cloud.colors, rgb.reshape(n, 3))
+    np.testing.assert_array_equal(cloud.confidence, conf.ravel())
+    with pytest.raises(TypeError):
+        frame.point_cloud(True)  # type: ignore[misc]
+    # After release the planes are gone, and so is the cloud.
+    with pytest.raises(ValueError, match="released"):
+        frame.point_cloud()
+
+
 def test_frames_header_shapes_and_views(service: str) -> None:
     sequences: list[int] = []
     run_ids: set[int] = set()
@@ -87,7 +134,8 @@ def test_frames_header_shapes_and_views(service: str) -> None:
                 h = frame.header
                 assert (h.width, h.height) == (WIDTH, HEIGHT)
                 assert frame.shape == (HEIGHT, WIDTH)
-                assert h.version == dear.FORMAT_VERSION == 2
+                assert h.version == dear.FORMAT_VERSION == 3
+                assert h.depth_unit_m == 1.0
                 assert 0 <= h.frame_id < 42  # samples/demo has 42 frames
                 # --refine none: aligned with the static calibration, no network, no bundle.
                 assert h.flags & dear.FLAG_ALIGNED

@@ -18,6 +18,9 @@ import numpy as np
 import numpy.typing as npt
 
 from dear._dear import (
+    CAMERA_MODEL_BROWN_CONRADY,
+    CAMERA_MODEL_PINHOLE,
+    CAMERA_MODEL_UNKNOWN,
     DEFAULT_SERVICE,
     ERROR_CODE_STEPS_PER_DOUBLING,
     ERROR_CODE_UNIT_M,
@@ -34,11 +37,16 @@ from dear._dear import (
     DearError,
     Frame,
     Header,
+    PointCloud,
+    PointCloudError,
     ReceiveError,
     Subscriber,
 )
 
 __all__ = [
+    "CAMERA_MODEL_BROWN_CONRADY",
+    "CAMERA_MODEL_PINHOLE",
+    "CAMERA_MODEL_UNKNOWN",
     "DEFAULT_SERVICE",
     "ERROR_CODE_STEPS_PER_DOUBLING",
     "ERROR_CODE_UNIT_M",
@@ -55,6 +63,8 @@ __all__ = [
     "DearError",
     "Frame",
     "Header",
+    "PointCloud",
+    "PointCloudError",
     "ReceiveError",
     "Subscriber",
     "expected_error_m",

@@ -2,7 +2,7 @@
 
 from collections.abc import Iterator
 from types import TracebackType
-from typing import Final, Literal
+from typing import Final, Literal, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -12,6 +12,10 @@ DEFAULT_SERVICE: Final[str]
 MAX_BORROWED_FRAMES: Final[int]
 """Samples one subscriber may hold at once (2): frames not released plus their arrays' samples."""
 FORMAT_VERSION: Final[int]
+"""3: the header carries the RGB camera's intrinsics."""
+CAMERA_MODEL_UNKNOWN: Final[int]
+CAMERA_MODEL_PINHOLE: Final[int]
+CAMERA_MODEL_BROWN_CONRADY: Final[int]
 FLAG_ALIGNED: Final[int]
 FLAG_REFINED_NETWORK: Final[int]
 FLAG_REFINED_CLASSICAL: Final[int]
@@ -33,8 +37,40 @@ class ConnectError(DearError):
 class ReceiveError(DearError):
     """Receiving or waiting for a frame failed; the message is the Rust error chain."""
 
+class PointCloudError(DearError):
+    """The frame carries no (or unusable) intrinsics; the message names the header field."""
+
+class Intrinsics(TypedDict):
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    model: Literal["pinhole", "brown_conrady"]
+    distortion: tuple[float, float, float, float, float] | None
+    """(k1, k2, p1, p2, k3), OpenCV's order, with model "brown_conrady"."""
+
+class PointCloud:
+    """An organised point cloud: one entry per pixel, row-major (N = width·height)."""
+
+    @property
+    def points(self) -> npt.NDArray[np.float32]:
+        """(N, 3) metres in the RGB camera's optical frame; NaN where not `valid`."""
+    @property
+    def valid(self) -> npt.NDArray[np.bool_]:
+        """(N,): the pixel has valid depth. `points[valid]` is the measured cloud."""
+    @property
+    def colors(self) -> npt.NDArray[np.uint8] | None:
+        """(N, 3) RGB of each point, with `point_cloud(colors=True)`."""
+    @property
+    def confidence(self) -> npt.NDArray[np.uint8] | None:
+        """(N,) confidence byte of each point, with `point_cloud(confidence=True)`."""
+    @property
+    def width(self) -> int: ...
+    @property
+    def height(self) -> int: ...
+
 class Header:
-    """A copy of the frame's 192-byte header (docs/protocol.md "Frame layout")."""
+    """A copy of the frame's 256-byte header (docs/protocol.md "Frame layout")."""
 
     @property
     def version(self) -> int: ...
@@ -88,6 +124,15 @@ class Header:
     def run_id(self) -> int: ...
     @property
     def sequence(self) -> int: ...
+    @property
+    def depth_unit_m(self) -> float:
+        """Metres per depth unit: 1.0."""
+    @property
+    def rgb_camera_model(self) -> int:
+        """`CAMERA_MODEL_*`: 0 unknown, 1 pinhole, 2 Brown-Conrady."""
+    @property
+    def intrinsics(self) -> Intrinsics | None:
+        """The RGB camera's intrinsics at the frame's size; None when unknown."""
 
 class Frame:
     """One received frame. Arrays are read-only zero-copy views that keep the sample alive."""
@@ -103,6 +148,9 @@ class Frame:
     @property
     def confidence(self) -> npt.NDArray[np.uint8]:
         """(H, W), 0 = invalid, 255 = measured and kept. Raises ValueError after `release()`."""
+    def point_cloud(self, *, colors: bool = False, confidence: bool = False) -> PointCloud:
+        """The back-projected depth (the Rust SDK's math). Raises PointCloudError without
+        intrinsics, ValueError after `release()`."""
     @property
     def shape(self) -> tuple[int, int]:
         """(height, width)."""
