@@ -52,8 +52,9 @@ pub struct DumpArgs {
     /// edges and tint over the RGB, to judge alignment).
     #[arg(long)]
     pub preview: bool,
-    /// RGB intrinsics `FX,FY,CX,CY` in px for `capture.json` (deard does not publish them;
-    /// default: a centred pinhole with a 70° horizontal field of view).
+    /// RGB intrinsics `FX,FY,CX,CY` in px for `capture.json`, instead of the first frame
+    /// header's (frames without intrinsics: a centred pinhole with a 70° horizontal field of
+    /// view, marked "assumed" in `source.intrinsics`).
     #[arg(long, value_name = "FX,FY,CX,CY", value_parser = parse_intrinsics)]
     pub intrinsics: Option<Intrinsics>,
 }
@@ -167,13 +168,29 @@ impl Dump {
     fn create(args: &DumpArgs, first: &Frame) -> anyhow::Result<Self> {
         let (w, h) = first.size();
         let (w, h) = (w as u32, h as u32);
-        let (intrinsics, intrinsics_note) = match args.intrinsics {
-            Some(k) => (k, "given with --intrinsics".to_string()),
-            None => (
+        let header_intrinsics = first.header().intrinsics().ok().flatten();
+        let (intrinsics, intrinsics_note) = match (args.intrinsics, header_intrinsics) {
+            (Some(k), _) => (k, "given with --intrinsics".to_string()),
+            (None, Some(k)) => (
+                Intrinsics {
+                    fx: k.fx,
+                    fy: k.fy,
+                    cx: k.cx,
+                    cy: k.cy,
+                },
+                match k.distortion {
+                    None => "from the first frame's header (pinhole)".to_string(),
+                    Some(d) => format!(
+                        "from the first frame's header; its Brown-Conrady distortion \
+                         [k1, k2, p1, p2, k3] = {d:?} is not kept (capture.json has none)"
+                    ),
+                },
+            ),
+            (None, None) => (
                 Intrinsics::from_hfov(w, h, DEFAULT_HFOV_DEG),
                 format!(
                     "assumed: centred pinhole, {DEFAULT_HFOV_DEG}° horizontal field of view \
-                     (deard publishes no intrinsics)"
+                     (the frame headers carry no intrinsics: rgb_camera_model 0)"
                 ),
             ),
         };

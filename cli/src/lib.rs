@@ -54,7 +54,8 @@ pub enum Command {
     ///
     /// Channels `/dear/<camera>/depth` (foxglove.RawImage, 16UC1 mm or 32FC1 m, 0 = invalid),
     /// `/rgb` (rgb8), `/confidence` (mono8) and `/calibration` (foxglove.CameraCalibration;
-    /// K, R, P zero, "uncalibrated", unless --intrinsics gives them: deard publishes none),
+    /// K, R, P and D from each frame header's intrinsics, or --intrinsics; zero, "uncalibrated",
+    /// for a frame without any),
     /// protobuf-encoded. Log time = capture time, publish time = the frame's publish time.
     /// Stops after --count frames, --seconds seconds, or at Ctrl-C / SIGTERM; the file is
     /// finished (summary and index) in every case. Lost frames are counted and printed.

@@ -7,12 +7,11 @@
 //! - `…/rgb`: `foxglove.RawImage`, `rgb8`;
 //! - `…/confidence`: `foxglove.RawImage`, `mono8` (0 = invalid … 255 = measured and kept);
 //! - `…/calibration`: `foxglove.CameraCalibration` of the RGB camera (the grid the depth is
-//!   aligned to). deard publishes no intrinsics — the header's `calib_*` fields are the
-//!   depth-to-RGB flow model `W = t/z + c`, not a camera matrix — so the message carries the
-//!   frame's width and height, and K, R, P from `--intrinsics` (pinhole, `plumb_bob` with zero
-//!   distortion: the model of the DEAR pipeline) or, without it, all zero: the ROS/Foxglove
-//!   convention for an uncalibrated camera, which viewers ignore instead of projecting with
-//!   made-up numbers;
+//!   aligned to): the frame's width and height, and K, R = I, P = [K | 0] and the `plumb_bob`
+//!   D from the frame header's intrinsics (format 3), or from `--intrinsics` (a pinhole), which
+//!   overrides them. A frame whose header says its intrinsics are unknown gets K, R, P all
+//!   zero: the ROS/Foxglove convention for an uncalibrated camera, which viewers ignore
+//!   instead of projecting with made-up numbers;
 //! - `…/calibration_health`: JSON (schema `dear.CalibrationHealth`, `mcap_file::HEALTH_SCHEMA`)
 //!   with the header's flow-model calibration, its fit figures and its health state (good /
 //!   can improve / needs recalibration, docs/calibration-health.md).
@@ -67,8 +66,8 @@ pub struct RecordArgs {
     /// Depth image encoding: 16UC1 (millimetres, u16) or 32FC1 (metres, f32, as published).
     #[arg(long, value_enum, value_name = "ENCODING", default_value = "16UC1")]
     pub depth_encoding: DepthEncoding,
-    /// RGB intrinsics `FX,FY,CX,CY` in px for the calibration channel (deard does not publish
-    /// them; without this flag its K, R and P are zero: "uncalibrated").
+    /// RGB intrinsics `FX,FY,CX,CY` in px for the calibration channel, instead of the ones
+    /// each frame header carries (a pinhole, no distortion).
     #[arg(long, value_name = "FX,FY,CX,CY", value_parser = parse_intrinsics)]
     pub intrinsics: Option<Intrinsics>,
     /// Give up when no frame arrives for this many seconds (first frame included).

@@ -5,6 +5,7 @@ use std::net::IpAddr;
 
 use anyhow::Context;
 use dear_capture::Intrinsics;
+use dear_client::{CameraIntrinsics, Rays};
 use rustdds::no_key::DataWriter;
 use rustdds::policy::{Durability, History, Reliability};
 use rustdds::{
@@ -35,7 +36,8 @@ pub struct Options {
     /// `frame_id` of every message.
     pub frame_id: String,
     pub depth_encoding: DepthEncoding,
-    /// The RGB camera's pinhole; without it no CameraInfo and no PointCloud2.
+    /// `--intrinsics`: the RGB camera's pinhole, instead of the intrinsics each frame header
+    /// carries. A frame with neither gets no CameraInfo and no PointCloud2.
     pub intrinsics: Option<Intrinsics>,
     /// Publish `depth/points`.
     pub cloud: bool,
@@ -104,8 +106,8 @@ pub struct Bridge {
     depth_info: Option<Topic<CameraInfo>>,
     color_info: Option<Topic<CameraInfo>>,
     points: Option<Topic<PointCloud2>>,
-    /// Per-column factors of the point cloud, reused.
-    xs: Vec<f32>,
+    /// The point cloud's rays, made again only when the intrinsics or the size change.
+    rays: Option<Rays>,
     // Dropped last: the writers need it.
     _participant: DomainParticipant,
 }
@@ -134,14 +136,14 @@ impl Bridge {
                 CAMERA_INFO_TYPE,
             )
         };
-        let k = options.intrinsics.is_some();
         Ok(Bridge {
             depth: image("depth/image_raw")?,
             color: image("color/image_raw")?,
             confidence: image("confidence/image_raw")?,
-            depth_info: k.then(|| info("depth/camera_info")).transpose()?,
-            color_info: k.then(|| info("color/camera_info")).transpose()?,
-            points: (k && options.cloud)
+            depth_info: Some(info("depth/camera_info")?),
+            color_info: Some(info("color/camera_info")?),
+            points: options
+                .cloud
                 .then(|| {
                     Topic::new(
                         &participant,
@@ -151,7 +153,7 @@ impl Bridge {
                     )
                 })
                 .transpose()?,
-            xs: Vec::new(),
+            rays: None,
             options,
             _participant: participant,
         })
@@ -192,17 +194,28 @@ impl Bridge {
                 .write(convert::confidence_image(p, header()))?;
             written += 1;
         }
-        if let Some(k) = self.options.intrinsics {
+        // `--intrinsics` overrides the header's; a frame with neither has no calibration.
+        let k = match self.options.intrinsics {
+            Some(k) => Some(CameraIntrinsics::pinhole(k.fx, k.fy, k.cx, k.cy)),
+            None => p.intrinsics,
+        };
+        if let Some(k) = k {
             for info in [&self.depth_info, &self.color_info].into_iter().flatten() {
                 if info.wanted() {
-                    info.write(convert::camera_info(p.width, p.height, k, header()))?;
+                    info.write(convert::camera_info(p.width, p.height, &k, header()))?;
                     written += 1;
                 }
             }
             if let Some(points) = &self.points {
                 if points.wanted() {
-                    let cloud =
-                        convert::point_cloud(p, k, self.options.cloud_rgb, header(), &mut self.xs);
+                    let size = (p.width as usize, p.height as usize);
+                    let rays = match self.rays.take() {
+                        Some(r) if *r.intrinsics() == k && r.size() == size => r,
+                        _ => Rays::new(&k, size.0, size.1)
+                            .with_context(|| format!("{}: the frame's intrinsics", points.name))?,
+                    };
+                    let cloud = convert::point_cloud(p, &rays, self.options.cloud_rgb, header());
+                    self.rays = Some(rays);
                     points.write(cloud)?;
                     written += 1;
                 }

@@ -1,7 +1,8 @@
 //! A deard frame's planes as ROS 2 messages (REP 118 depth images, REP 103 optical frame: x
 //! right, y down, z forward).
 
-use dear_capture::{is_valid_depth, Intrinsics};
+use dear_capture::is_valid_depth;
+use dear_client::{CameraIntrinsics, Rays};
 
 use crate::msg::{
     CameraInfo, Header, Image, PointCloud2, PointField, RegionOfInterest, Time, FLOAT32,
@@ -37,6 +38,8 @@ pub struct Planes<'a> {
     pub rgb: &'a [u8],
     /// `width·height` bytes.
     pub confidence: &'a [u8],
+    /// The RGB camera's intrinsics the frame header carries (format 3), if any.
+    pub intrinsics: Option<CameraIntrinsics>,
 }
 
 /// The `std_msgs/Header` of every message of a frame.
@@ -112,16 +115,17 @@ pub fn confidence_image(p: &Planes, header: Header) -> Image {
     }
 }
 
-/// The RGB camera's calibration (the depth is aligned to it, so depth and colour share it): a
-/// pinhole without distortion (`plumb_bob`, D zero), R the identity, P = [K | 0].
-pub fn camera_info(width: u32, height: u32, k: Intrinsics, header: Header) -> CameraInfo {
+/// The RGB camera's calibration (the depth is aligned to it, so depth and colour share it):
+/// `plumb_bob` with the Brown–Conrady D the header carries (zero for a pinhole), R the
+/// identity, P = [K | 0] (the images are published as captured, not rectified).
+pub fn camera_info(width: u32, height: u32, k: &CameraIntrinsics, header: Header) -> CameraInfo {
     let (fx, fy, cx, cy) = (k.fx as f64, k.fy as f64, k.cx as f64, k.cy as f64);
     CameraInfo {
         header,
         height,
         width,
         distortion_model: "plumb_bob".to_string(),
-        d: vec![0.0; 5],
+        d: k.distortion.unwrap_or_default().map(f64::from).to_vec(),
         k: [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
         r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
         p: [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
@@ -132,16 +136,11 @@ pub fn camera_info(width: u32, height: u32, k: Intrinsics, header: Header) -> Ca
 }
 
 /// The organised point cloud (height × width points, row-major like the image): `x, y, z`
-/// float32 in metres in the optical frame, and with `with_rgb` the ROS `rgb` field (a float32
-/// whose bytes are B, G, R, 0, as PCL packs it). Invalid depth gives NaN x, y, z
-/// (`is_dense` false).
-pub fn point_cloud(
-    p: &Planes,
-    k: Intrinsics,
-    with_rgb: bool,
-    header: Header,
-    xs: &mut Vec<f32>,
-) -> PointCloud2 {
+/// float32 in metres in the optical frame, back-projected by the client SDK's `Rays` (the one
+/// definition every SDK uses: pinhole, distortion undone), and with `with_rgb` the ROS `rgb`
+/// field (a float32 whose bytes are B, G, R, 0, as PCL packs it). Invalid depth gives NaN x,
+/// y, z (`is_dense` false). `rays` must be of the frame's size.
+pub fn point_cloud(p: &Planes, rays: &Rays, with_rgb: bool, header: Header) -> PointCloud2 {
     let (w, h) = (p.width as usize, p.height as usize);
     let point_step: usize = if with_rgb { 16 } else { 12 };
     let field = |name: &str, offset: u32| PointField {
@@ -154,20 +153,12 @@ pub fn point_cloud(
     if with_rgb {
         fields.push(field("rgb", 12));
     }
-    // (u - cx) / fx for each column, computed once per frame.
-    xs.clear();
-    xs.extend((0..w).map(|u| (u as f32 - k.cx) / k.fx));
+    assert_eq!(rays.size(), (w, h), "rays of another size than the frame");
     let mut data = vec![0u8; w * h * point_step];
     for (v, row) in data.chunks_exact_mut(w * point_step).enumerate() {
-        let ry = (v as f32 - k.cy) / k.fy;
-        let depth = &p.depth[v * w..(v + 1) * w];
         for (u, point) in row.chunks_exact_mut(point_step).enumerate() {
-            let z = depth[u];
-            let xyz = if is_valid_depth(z) {
-                [xs[u] * z, ry * z, z]
-            } else {
-                [f32::NAN; 3]
-            };
+            let i = v * w + u;
+            let xyz = rays.point(i, p.depth[i]).unwrap_or([f32::NAN; 3]);
             point[0..4].copy_from_slice(&xyz[0].to_le_bytes());
             point[4..8].copy_from_slice(&xyz[1].to_le_bytes());
             point[8..12].copy_from_slice(&xyz[2].to_le_bytes());
@@ -239,6 +230,7 @@ mod tests {
             depth,
             rgb,
             confidence,
+            intrinsics: None,
         }
     }
 
@@ -292,13 +284,9 @@ mod tests {
         let depth = [2.0, 0.0, 2.0, 2.0, 2.0, 1.0];
         let rgb: Vec<u8> = (0..18).collect();
         let p = planes(&depth, &rgb, &[0; 6]);
-        let k = Intrinsics {
-            fx: 2.0,
-            fy: 4.0,
-            cx: 1.0,
-            cy: 0.0,
-        };
-        let cloud = point_cloud(&p, k, true, header(0, "f"), &mut Vec::new());
+        let k = CameraIntrinsics::pinhole(2.0, 4.0, 1.0, 0.0);
+        let rays = Rays::new(&k, 3, 2).unwrap();
+        let cloud = point_cloud(&p, &rays, true, header(0, "f"));
         assert_eq!(
             (cloud.width, cloud.height, cloud.point_step, cloud.row_step),
             (3, 2, 16, 48)
@@ -313,7 +301,7 @@ mod tests {
         assert_eq!(&cloud.data[5 * 16 + 12..5 * 16 + 16], &[17, 16, 15, 0]);
         let names: Vec<&str> = cloud.fields.iter().map(|f| f.name.as_str()).collect();
         assert_eq!(names, ["x", "y", "z", "rgb"]);
-        let plain = point_cloud(&p, k, false, header(0, "f"), &mut Vec::new());
+        let plain = point_cloud(&p, &rays, false, header(0, "f"));
         assert_eq!(
             (plain.point_step, plain.data.len(), plain.fields.len()),
             (12, 72, 3)
@@ -322,19 +310,22 @@ mod tests {
 
     #[test]
     fn camera_info_carries_k() {
-        let k = Intrinsics {
-            fx: 500.0,
-            fy: 510.0,
-            cx: 319.5,
-            cy: 239.5,
-        };
-        let info = camera_info(640, 480, k, header(0, "f"));
+        let k = CameraIntrinsics::pinhole(500.0, 510.0, 319.5, 239.5);
+        let info = camera_info(640, 480, &k, header(0, "f"));
         assert_eq!(
             info.k,
             [500.0, 0.0, 319.5, 0.0, 510.0, 239.5, 0.0, 0.0, 1.0]
         );
         assert_eq!(info.p[..4], [500.0, 0.0, 319.5, 0.0]);
         assert_eq!(info.distortion_model, "plumb_bob");
+        assert_eq!(info.d, [0.0; 5]);
+        // The header's Brown–Conrady coefficients are D.
+        let distorted = CameraIntrinsics {
+            distortion: Some([0.5, -0.25, 0.125, 0.0, 1.0]),
+            ..k
+        };
+        let info = camera_info(640, 480, &distorted, header(0, "f"));
+        assert_eq!(info.d, [0.5, -0.25, 0.125, 0.0, 1.0]);
     }
 
     #[test]

@@ -16,8 +16,9 @@ use dear_ros2::convert::{namespace_for_service, DepthEncoding, Planes};
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 /// Publishes a deard frame service as ROS 2 topics over DDS: depth, colour and confidence
-/// images, and with --intrinsics CameraInfo and an organised PointCloud2 (sensor-data QoS,
-/// stamps = the frames' capture times). No ROS install needed; docs/ros2.md.
+/// images, and CameraInfo and an organised PointCloud2 from the intrinsics each frame header
+/// carries (or --intrinsics) (sensor-data QoS, stamps = the frames' capture times). No ROS
+/// install needed; docs/ros2.md.
 #[derive(Debug, Parser)]
 #[command(name = "dear-ros2", version)]
 struct Args {
@@ -38,8 +39,8 @@ struct Args {
     /// Depth image encoding: 16UC1 (mm, 0 = invalid) or 32FC1 (m, NaN = invalid).
     #[arg(long, value_enum, default_value_t = DepthEncoding::Mm16)]
     depth_encoding: DepthEncoding,
-    /// RGB intrinsics `FX,FY,CX,CY` in px (deard does not publish them yet). Without them no
-    /// CameraInfo and no PointCloud2 are published.
+    /// RGB intrinsics `FX,FY,CX,CY` in px (a pinhole), instead of the ones each frame header
+    /// carries (format 3). A frame with neither gets no CameraInfo and no PointCloud2.
     #[arg(long, value_name = "FX,FY,CX,CY", value_parser = dear_capture::parse_intrinsics)]
     intrinsics: Option<Intrinsics>,
     /// Do not publish the point cloud.
@@ -159,12 +160,6 @@ fn main() -> anyhow::Result<()> {
     if !options.namespace.starts_with('/') {
         anyhow::bail!("--namespace {:?} must start with /", options.namespace);
     }
-    if options.intrinsics.is_none() {
-        tracing::warn!(
-            "no --intrinsics: publishing images only (CameraInfo and PointCloud2 need the RGB \
-             camera's FX,FY,CX,CY, which deard does not publish yet)"
-        );
-    }
     let frame_id = options.frame_id.clone();
     let mut bridge = Bridge::new(options)?;
     if !(args.timeout_s >= 0.0 && args.timeout_s.is_finite()) {
@@ -196,6 +191,7 @@ fn main() -> anyhow::Result<()> {
     let mut work_ms = Vec::new();
     let mut cpu_start = None;
     let mut last_frame = Instant::now();
+    let (mut no_intrinsics_said, mut bad_intrinsics_said) = (false, false);
     while !stop.load(Ordering::Relaxed) && args.count.is_none_or(|n| frames < n) {
         let Some(mut frame) = client.wait(Duration::from_millis(200))? else {
             if last_frame.elapsed() >= timeout {
@@ -223,7 +219,29 @@ fn main() -> anyhow::Result<()> {
             depth: frame.depth(),
             rgb: frame.rgb(),
             confidence: frame.confidence(),
+            intrinsics: match h.intrinsics() {
+                Ok(k) => k,
+                Err(e) => {
+                    // Published by no deard; said once, then the frame goes without them.
+                    if !bad_intrinsics_said {
+                        tracing::warn!(
+                            frame = h.frame_id,
+                            "{e}: no CameraInfo or PointCloud2 for such frames"
+                        );
+                        bad_intrinsics_said = true;
+                    }
+                    None
+                }
+            },
         };
+        if planes.intrinsics.is_none() && args.intrinsics.is_none() && !no_intrinsics_said {
+            tracing::warn!(
+                "frame {} carries no intrinsics (rgb_camera_model 0) and no --intrinsics was \
+                 given: images only, no CameraInfo or PointCloud2 for such frames",
+                h.frame_id
+            );
+            no_intrinsics_said = true;
+        }
         let stamp = match args.stamp {
             Stamp::Capture => h.capture_timestamp_ns,
             // The offset now, per frame: it follows the system clock's adjustments.

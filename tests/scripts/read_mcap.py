@@ -5,6 +5,11 @@ AssertionError) on the first mismatch.
 
 Usage: read_mcap.py FILE --prefix /dear/cam0 --capture samples/demo/capture.json
        [--frames N | --at-least N] [--depth-encoding 16UC1|32FC1] [--size 320x240]
+       [--intrinsics FX,FY,CX,CY]
+
+The calibration channel must carry the replayed capture's intrinsics (deard puts them in every
+frame header, format 3), or the ones given with --intrinsics (what `dear record --intrinsics`
+was given).
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ def main() -> None:
     parser.add_argument("--at-least", type=int)
     parser.add_argument("--depth-encoding", default="16UC1")
     parser.add_argument("--size", default="320x240")
+    parser.add_argument("--intrinsics")
     args = parser.parse_args()
     width, height = (int(v) for v in args.size.split("x"))
     capture_stamps = {f["timestamp_ns"] for f in json.loads(args.capture.read_text())["frames"]}
@@ -134,9 +140,21 @@ def main() -> None:
         assert stamp in capture_stamps, h
     print(f"calibration health: {sorted({h['health'] for _, h in health})}")
 
+    if args.intrinsics:
+        fx, fy, cx, cy = (float(v) for v in args.intrinsics.split(","))
+    else:
+        k = json.loads(args.capture.read_text())["intrinsics"]
+        fx, fy, cx, cy = k["fx"], k["fy"], k["cx"], k["cy"]
+    want_k = [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]
+    want_p = [fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0]
     for _, calibration in by_topic[topics["calibration"]]:
         assert (calibration.width, calibration.height) == (width, height)
-        assert len(calibration.K) == 9 and calibration.K[0] == 0.0, list(calibration.K)
+        np.testing.assert_allclose(list(calibration.K), want_k, rtol=1e-6)
+        np.testing.assert_allclose(list(calibration.P), want_p, rtol=1e-6)
+        np.testing.assert_array_equal(list(calibration.R), [1, 0, 0, 0, 1, 0, 0, 0, 1])
+        assert calibration.distortion_model == "plumb_bob", calibration.distortion_model
+        assert list(calibration.D) == [0.0] * 5, list(calibration.D)
+    print(f"calibration: K = {want_k} (plumb_bob, D zero)")
 
     # deard: confidence is 0 exactly where depth is 0, so the frame's valid depth pixels are
     # its non-zero confidence pixels; the decoded depth image must have the same number.

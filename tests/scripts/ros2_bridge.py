@@ -8,7 +8,8 @@ QoS, and checks, with `deard` replaying samples/demo in a loop and `dear-ros2` p
 - the 16UC1 depth received equals, pixel for pixel, the depth PNG that `dear dump` writes for
   the same frame (the frame with the same capture stamp, received within a second of the
   publication time `dear dump` records: the replay's 2.8 s loop repeats stamps);
-- CameraInfo carries the K given with --intrinsics (and P = [K | 0], plumb_bob, D zero);
+- CameraInfo carries the capture's K, which deard puts in every frame header (format 3) and the
+  bridge takes from there, no --intrinsics given (and P = [K | 0], plumb_bob, D zero);
 - PointCloud2 is organised (width × height points, x, y, z float32), z equals the depth image
   of the same frame (to the millimetre's rounding) where it is valid, x and y back-project
   with K, and x, y, z are NaN where the depth is invalid;
@@ -290,12 +291,12 @@ class Run:
                     [*deard, "--refine", refine], stdout=subprocess.DEVNULL, stderr=log
                 )
             )
-        intrinsics = ",".join(map(str, self.k))
+        # No --intrinsics: CameraInfo and the point cloud take the frame headers' (format 3).
         with open(self.logs["bridge"], "wb") as log:
             self.bridge = subprocess.Popen(
                 [
                     *[bin_dir / "dear-ros2", "--service", self.service],
-                    *["--domain-id", str(domain), "--intrinsics", intrinsics],
+                    *["--domain-id", str(domain)],
                     *["--interface", "127.0.0.1", "--stats", *bridge_args],
                 ],
                 stdout=subprocess.PIPE,

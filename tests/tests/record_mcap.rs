@@ -1,7 +1,9 @@
 //! `dear record --mcap` end to end: `deard` replays `samples/demo`, the real `dear` binary
 //! records it, and the file is read back by a reader nobody here wrote — the `mcap` Python
 //! package with `mcap-protobuf-support` (`tests/scripts/read_mcap.py`, in the project's
-//! `.venv`, installed by `scripts/setup.sh` from `train/`'s dev extras).
+//! `.venv`, installed by `scripts/setup.sh` from `train/`'s dev extras). The calibration
+//! channel must hold the capture's intrinsics, which deard puts in every frame header (format
+//! 3), unless `--intrinsics` overrides them.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -129,7 +131,14 @@ fn ten_recorded_frames_read_back_with_the_mcap_package() {
         &service,
         &iox_root,
         &file,
-        &["--count", "3", "--depth-encoding", "32FC1"],
+        &[
+            "--count",
+            "3",
+            "--depth-encoding",
+            "32FC1",
+            "--intrinsics",
+            "500,510,160,120",
+        ],
     )
     .output()
     .expect("run dear record");
@@ -139,7 +148,15 @@ fn ten_recorded_frames_read_back_with_the_mcap_package() {
         &python,
         &file,
         &service,
-        &["--frames", "3", "--depth-encoding", "32FC1"],
+        &[
+            "--frames",
+            "3",
+            "--depth-encoding",
+            "32FC1",
+            // --intrinsics overrides the headers' (the capture's): read_mcap.py expects these.
+            "--intrinsics",
+            "500,510,160,120",
+        ],
     );
 
     // The file exists now: a second recording must not overwrite it, and says so.

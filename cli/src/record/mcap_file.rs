@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use dear_capture::Intrinsics;
-use dear_proto::FrameHeader;
+use dear_proto::{CameraIntrinsics, FrameHeader};
 use foxglove::bytes::Bytes;
 use foxglove::messages::{CameraCalibration, RawImage, Timestamp};
 use foxglove::Encode;
@@ -167,7 +167,12 @@ pub struct Recorder<W: Write + Seek> {
     service: String,
     topics: Topics,
     depth_encoding: DepthEncoding,
+    /// `--intrinsics`: used instead of the headers' when given.
     intrinsics: Option<Intrinsics>,
+    /// The first header intrinsics recorded, for the summary.
+    header_intrinsics: Option<CameraIntrinsics>,
+    /// Frames whose calibration message had no intrinsics (K, R, P zero).
+    frames_without_intrinsics: u64,
     depth_channel: u16,
     rgb_channel: u16,
     confidence_channel: u16,
@@ -205,9 +210,10 @@ pub const HEALTH_SCHEMA: &str = r#"{
   }
 }"#;
 
-/// What the `CameraCalibration` messages say without `--intrinsics`.
+/// What the `CameraCalibration` messages of frames without intrinsics say.
 pub const NO_INTRINSICS_NOTE: &str = "uncalibrated: K, R and P all zero (the ROS and Foxglove \
-     convention for an unknown calibration; deard publishes no intrinsics), no distortion model";
+     convention for an unknown calibration; the frame headers said \"unknown\", \
+     rgb_camera_model 0), no distortion model";
 
 impl<W: Write + Seek> Recorder<W> {
     /// Starts the file on `out` (`path` only names it in messages): header, schemas, channels.
@@ -301,6 +307,8 @@ impl<W: Write + Seek> Recorder<W> {
             topics,
             depth_encoding,
             intrinsics,
+            header_intrinsics: None,
+            frames_without_intrinsics: 0,
             depth_channel,
             rgb_channel,
             confidence_channel,
@@ -396,7 +404,20 @@ impl<W: Write + Seek> Recorder<W> {
                 .context("cannot encode a foxglove.RawImage")?;
             self.write(channel, &message, h.sequence)?;
         }
-        let calibration = calibration(h, stamp, frame_id, self.intrinsics);
+        // `--intrinsics` overrides; else the header's (format 3); a header without usable ones
+        // gives the "uncalibrated" message.
+        let intrinsics = match self.intrinsics {
+            Some(k) => Some(CameraIntrinsics::pinhole(k.fx, k.fy, k.cx, k.cy)),
+            None => h.intrinsics().ok().flatten(),
+        };
+        match intrinsics {
+            None => self.frames_without_intrinsics += 1,
+            Some(k) if self.intrinsics.is_none() && self.header_intrinsics.is_none() => {
+                self.header_intrinsics = Some(k)
+            }
+            Some(_) => {}
+        }
+        let calibration = calibration(h, stamp, frame_id, intrinsics.as_ref());
         self.buf.clear();
         calibration
             .encode(&mut self.buf)
@@ -446,12 +467,25 @@ impl<W: Write + Seek> Recorder<W> {
     /// file has its messages but no index (readers that scan still read it).
     pub fn finish(mut self) -> anyhow::Result<(RecordSummary, W)> {
         let summary = self.summary();
-        let calibration = match self.intrinsics {
-            Some(k) => format!(
+        let calibration = match (self.intrinsics, self.header_intrinsics) {
+            (Some(k), _) => format!(
                 "given with --intrinsics: fx={} fy={} cx={} cy={} (pinhole, no distortion)",
                 k.fx, k.fy, k.cx, k.cy
             ),
-            None => NO_INTRINSICS_NOTE.to_string(),
+            (None, Some(k)) => format!(
+                "from the frame headers (format 3), first: fx={} fy={} cx={} cy={} ({}); {} \
+                 frames without intrinsics ({NO_INTRINSICS_NOTE})",
+                k.fx,
+                k.fy,
+                k.cx,
+                k.cy,
+                match k.distortion {
+                    Some(d) => format!("plumb_bob D={d:?}"),
+                    None => "pinhole, no distortion".to_string(),
+                },
+                self.frames_without_intrinsics
+            ),
+            (None, None) => NO_INTRINSICS_NOTE.to_string(),
         };
         let metadata: BTreeMap<String, String> = [
             ("service", self.service.clone()),
@@ -543,22 +577,30 @@ fn health_message(h: &FrameHeader, frame_id: &str) -> serde_json::Value {
     })
 }
 
-/// The RGB camera's calibration message. deard publishes no intrinsics — the header's
-/// `calib_*` fields are the depth-to-RGB flow model `W = t/z + c`, not a camera matrix — so
-/// K, R and P come from `--intrinsics` (a pinhole without distortion, the model the DEAR
-/// pipeline uses) or are all zero, which ROS and Foxglove read as "uncalibrated".
+/// The RGB camera's calibration message: K, R and P from the frame header's intrinsics (format
+/// 3) or `--intrinsics`, `plumb_bob` with the Brown–Conrady D the header carries (zeros for a
+/// pinhole), R the identity and P = [K | 0] (the image is published as captured, not
+/// rectified); without intrinsics all zero, which ROS and Foxglove read as "uncalibrated".
+/// (The header's `calib_*` fields are the depth-to-RGB flow model `W = t/z + c`, not a camera
+/// matrix.)
 fn calibration(
     header: &FrameHeader,
     timestamp: Option<Timestamp>,
     frame_id: String,
-    intrinsics: Option<Intrinsics>,
+    intrinsics: Option<&CameraIntrinsics>,
 ) -> CameraCalibration {
     let (distortion_model, d, k, r, p) = match intrinsics {
-        Some(Intrinsics { fx, fy, cx, cy }) => {
+        Some(&CameraIntrinsics {
+            fx,
+            fy,
+            cx,
+            cy,
+            distortion,
+        }) => {
             let (fx, fy, cx, cy) = (f64::from(fx), f64::from(fy), f64::from(cx), f64::from(cy));
             (
                 "plumb_bob".to_string(),
-                vec![0.0; 5],
+                distortion.unwrap_or_default().map(f64::from).to_vec(),
                 vec![fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
                 vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
                 vec![fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
@@ -645,6 +687,67 @@ mod tests {
         h.capture_timestamp_ns = capture_ns;
         h.publish_timestamp_ns = 1_000 + capture_ns;
         h
+    }
+
+    #[test]
+    fn the_calibration_comes_from_the_header_unless_overridden() {
+        let k = CameraIntrinsics {
+            distortion: Some([0.1, -0.2, 0.001, 0.002, 0.05]),
+            ..CameraIntrinsics::pinhole(300.0, 310.0, 160.5, 119.5)
+        };
+        let mut h = header(0, 10);
+        h.set_intrinsics(Some(&k));
+        let mut rec = Recorder::new(
+            Cursor::new(Vec::new()),
+            Path::new("mem.mcap"),
+            "dear/cam0/frames",
+            DepthEncoding::Millimetres16,
+            None,
+        )
+        .unwrap();
+        let (depth, rgb, confidence) = (vec![1.0f32; 8], vec![1u8; 24], vec![255u8; 8]);
+        let frame = |h| FrameData {
+            header: h,
+            depth: &depth,
+            rgb: &rgb,
+            confidence: &confidence,
+        };
+        rec.add(&frame(&h)).unwrap();
+        let unknown = header(1, 20);
+        rec.add(&frame(&unknown)).unwrap();
+        let (_, out) = rec.finish().unwrap();
+        let bytes = out.into_inner();
+        let messages: Vec<CameraCalibration> = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(Result::unwrap)
+            .filter(|m| m.channel.topic == "/dear/cam0/calibration")
+            .map(|m| <CameraCalibration as foxglove::Decode>::decode(&m.data[..]).unwrap())
+            .collect();
+        assert_eq!(messages.len(), 2);
+        let c = &messages[0];
+        assert_eq!(c.distortion_model, "plumb_bob");
+        assert_eq!(c.k, [300.0, 0.0, 160.5, 0.0, 310.0, 119.5, 0.0, 0.0, 1.0]);
+        assert_eq!(
+            c.p,
+            [300.0, 0.0, 160.5, 0.0, 0.0, 310.0, 119.5, 0.0, 0.0, 0.0, 1.0, 0.0]
+        );
+        let d: Vec<f32> = c.d.iter().map(|&v| v as f32).collect();
+        assert_eq!(d, [0.1, -0.2, 0.001, 0.002, 0.05]);
+        // A frame that says "unknown": uncalibrated, never made-up numbers.
+        assert_eq!(messages[1].k, [0.0; 9]);
+        assert_eq!(messages[1].distortion_model, "");
+
+        // --intrinsics wins over the header.
+        let given = Intrinsics {
+            fx: 500.0,
+            fy: 500.0,
+            cx: 1.5,
+            cy: 0.5,
+        };
+        let pinhole = CameraIntrinsics::pinhole(given.fx, given.fy, given.cx, given.cy);
+        let c = calibration(&h, None, "cam0".into(), Some(&pinhole));
+        assert_eq!(c.k[0], 500.0);
+        assert_eq!(c.d, [0.0; 5]);
     }
 
     #[test]
