@@ -754,7 +754,7 @@ pub unsafe extern "C" fn dear_frame_point_cloud(
         };
         let intrinsics = sdk::points::header_intrinsics(header).map_err(no_intrinsics)?;
         let (width, height) = frame.size();
-        let rays = sdk::Rays::new(&intrinsics, width, height).map_err(|source| {
+        let rays = sdk::Rays::shared(&intrinsics, width, height).map_err(|source| {
             no_intrinsics(sdk::PointCloudError::Intrinsics {
                 frame_id: header.frame_id,
                 source,

@@ -15,6 +15,8 @@
 //! (`FrameHeader::depth_unit_m` is 1). A pixel without valid depth (0, negative, NaN, ∞) is not
 //! a point: its `valid` entry is false and its coordinates are NaN, never `(0, 0, 0)`.
 
+use std::sync::{Arc, Mutex};
+
 use dear_proto::{CameraIntrinsics, FrameHeader, IntrinsicsError};
 
 use crate::frame::Frame;
@@ -155,6 +157,27 @@ impl Rays {
         })
     }
 
+    /// [`Rays::new`], but the last rays made by this function in this process are reused when
+    /// the intrinsics and size are the same (a stream's every frame): the undistortion is then
+    /// paid once per camera, not per frame. What [`point_cloud`] and the C and Python SDKs use.
+    pub fn shared(
+        intrinsics: &CameraIntrinsics,
+        width: usize,
+        height: usize,
+    ) -> Result<Arc<Self>, IntrinsicsError> {
+        static LAST: Mutex<Option<Arc<Rays>>> = Mutex::new(None);
+        // A panic elsewhere while holding the lock leaves a valid `Option`: use it anyway.
+        let mut last = LAST.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(rays) = last.as_ref() {
+            if rays.intrinsics == *intrinsics && rays.size() == (width, height) {
+                return Ok(Arc::clone(rays));
+            }
+        }
+        let rays = Arc::new(Rays::new(intrinsics, width, height)?);
+        *last = Some(Arc::clone(&rays));
+        Ok(rays)
+    }
+
     pub fn intrinsics(&self) -> &CameraIntrinsics {
         &self.intrinsics
     }
@@ -284,12 +307,13 @@ pub fn point_cloud(
     options: PointCloudOptions,
 ) -> Result<PointCloud, PointCloudError> {
     let k = header_intrinsics(header)?;
-    let rays = Rays::new(&k, header.width as usize, header.height as usize).map_err(|source| {
-        PointCloudError::Intrinsics {
-            frame_id: header.frame_id,
-            source,
-        }
-    })?;
+    let rays =
+        Rays::shared(&k, header.width as usize, header.height as usize).map_err(|source| {
+            PointCloudError::Intrinsics {
+                frame_id: header.frame_id,
+                source,
+            }
+        })?;
     let mut cloud = rays.back_project(depth)?;
     if options.colors {
         rays.check_len("the RGB plane", rgb.len(), 3)?;
@@ -430,6 +454,28 @@ mod tests {
                 .contains("the depth plane has 11 values, but a 4×3 frame needs 12"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn shared_rays_are_made_once_per_camera() {
+        let a = CameraIntrinsics::pinhole(300.0, 300.0, 7.5, 5.5);
+        let b = CameraIntrinsics {
+            distortion: Some([0.1, 0.0, 0.0, 0.0, 0.0]),
+            ..a
+        };
+        // Other tests may call `shared` meanwhile (one entry, process-wide): values are
+        // compared, and reuse is looked for over a few back-to-back pairs of calls.
+        let first = Rays::shared(&a, 16, 12).unwrap();
+        assert_eq!(*first, Rays::new(&a, 16, 12).unwrap());
+        let other = Rays::shared(&b, 16, 12).unwrap();
+        assert_eq!(other.intrinsics(), &b);
+        assert_ne!(*other, *first, "the distortion changes the rays");
+        assert_eq!(Rays::shared(&a, 16, 13).unwrap().size(), (16, 13));
+        let reused = (0..100).any(|_| {
+            let x = Rays::shared(&b, 20, 10).unwrap();
+            Arc::ptr_eq(&x, &Rays::shared(&b, 20, 10).unwrap())
+        });
+        assert!(reused, "the same camera's rays are reused");
     }
 
     #[test]
