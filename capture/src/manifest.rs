@@ -120,6 +120,12 @@ pub struct CaptureManifest {
     /// Intrinsics of the RGB camera (the ToF images are rectified to it by the factory
     /// calibration).
     pub intrinsics: Intrinsics,
+    /// The RGB camera's Brown–Conrady lens distortion `[k1, k2, p1, p2, k3]` (OpenCV's order,
+    /// ROS's `plumb_bob`), each finite; absent when there is none (a pinhole, the simulator's
+    /// camera). deard publishes it with the intrinsics in every frame header.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(transform = finite_items)]
+    pub distortion: Option<[f32; 5]>,
     /// The factory (initial, weak) calibration, in the flow model of [`Calibration`]
     /// (identity when absent).
     #[serde(default)]
@@ -137,6 +143,15 @@ pub struct CaptureManifest {
     pub source: serde_json::Value,
     /// The frames, in capture order.
     pub frames: Vec<FrameEntry>,
+}
+
+/// Schema of an array of numbers finite as f32 (the maximum refuses the infinity Python's
+/// `json` reads `1e400` as, and what f32 cannot hold).
+fn finite_items(schema: &mut schemars::Schema) {
+    if let Some(items) = schema.get_mut("items").and_then(|i| i.as_object_mut()) {
+        items.insert("minimum".into(), (-f64::from(f32::MAX)).into());
+        items.insert("maximum".into(), f64::from(f32::MAX).into());
+    }
 }
 
 /// Schema of an array of positive finite numbers: `inner(range(...))` has no exclusive bound.
@@ -157,6 +172,7 @@ impl CaptureManifest {
             width,
             height,
             intrinsics,
+            distortion: None,
             initial_calibration: Calibration::IDENTITY,
             depth_scale: 0.001,
             modulation_frequencies_hz: Vec::new(),
@@ -223,6 +239,14 @@ impl CaptureManifest {
             if !v.is_finite() {
                 return Err(format!(
                     "field `intrinsics.{name}` is {v}, expected a finite number"
+                ));
+            }
+        }
+        if let Some(d) = &self.distortion {
+            if let Some((i, k)) = d.iter().enumerate().find(|(_, k)| !k.is_finite()) {
+                return Err(format!(
+                    "field `distortion[{i}]` is {k}, expected a finite Brown–Conrady \
+                     coefficient (distortion = [k1, k2, p1, p2, k3])"
                 ));
             }
         }

@@ -65,6 +65,10 @@ fn check_manifest(m: &CaptureManifest, want: &Value) {
         calibration(&want["initial_calibration"])
     );
     assert_eq!(m.depth_scale, f32_of(&want["depth_scale"]));
+    let distortion = want["distortion"]
+        .as_array()
+        .map(|d| <[f32; 5]>::try_from(d.iter().map(f32_of).collect::<Vec<_>>()).unwrap());
+    assert_eq!(m.distortion, distortion);
     let freqs: Vec<f64> = want["modulation_frequencies_hz"]
         .as_array()
         .unwrap()

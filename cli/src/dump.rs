@@ -178,13 +178,7 @@ impl Dump {
                     cx: k.cx,
                     cy: k.cy,
                 },
-                match k.distortion {
-                    None => "from the first frame's header (pinhole)".to_string(),
-                    Some(d) => format!(
-                        "from the first frame's header; its Brown-Conrady distortion \
-                         [k1, k2, p1, p2, k3] = {d:?} is not kept (capture.json has none)"
-                    ),
-                },
+                "from the first frame's header".to_string(),
             ),
             (None, None) => (
                 Intrinsics::from_hfov(w, h, DEFAULT_HFOV_DEG),
@@ -195,6 +189,10 @@ impl Dump {
             ),
         };
         let mut manifest = CaptureManifest::new(w, h, intrinsics);
+        // The header's distortion goes with its intrinsics (not with --intrinsics, a pinhole).
+        if args.intrinsics.is_none() {
+            manifest.distortion = header_intrinsics.and_then(|k| k.distortion);
+        }
         manifest.source = json!({
             "recorded_by": "dear dump",
             "dear_client_version": env!("CARGO_PKG_VERSION"),

@@ -7,6 +7,9 @@
  *     c_api frames SERVICE           a running deard: planes, header, the held-frames limit
  *     c_api points SERVICE           a running deard: the point cloud of a frame (format 3's
  *                                    intrinsics), checked point by point against the header
+ *     c_api distorted SERVICE K1 K2 P1 P2 K3
+ *                                    a deard replaying a capture with that distortion: the
+ *                                    header carries it, every point reprojects onto its pixel
  *
  * Prints "ok <check>" per check; on the first failed check prints "FAIL ..." and exits 1.
  */
@@ -233,7 +236,74 @@ static void points(const char *service) {
     ok("point cloud: every pixel's point from the header's intrinsics, invalid depth masked");
 }
 
+/* Brown-Conrady distortion of a normalised point (OpenCV's model), in double. */
+static void distort(const float *d, double x, double y, double *xd, double *yd) {
+    double r2 = x * x + y * y;
+    double radial = 1.0 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]));
+    *xd = x * radial + 2.0 * d[2] * x * y + d[3] * (r2 + 2.0 * x * x);
+    *yd = y * radial + d[2] * (r2 + 2.0 * y * y) + 2.0 * d[3] * x * y;
+}
+
+static void distorted(const char *service, char **coefficients) {
+    dear_client *client = NULL;
+    EXPECT_STATUS(dear_client_connect(service, &client), DEAR_OK);
+    dear_frame *frame = NULL;
+    EXPECT_STATUS(dear_client_wait(client, 20000, &frame), DEAR_OK);
+    const dear_header *h = dear_frame_header(frame);
+    CHECK(h->rgb_camera_model == DEAR_CAMERA_MODEL_BROWN_CONRADY, "model %u",
+          (unsigned)h->rgb_camera_model);
+    for (int i = 0; i < 5; i++) {
+        float want = strtof(coefficients[i], NULL);
+        CHECK(h->rgb_distortion[i] == want, "coefficient %d: %g, capture.json %g", i,
+              (double)h->rgb_distortion[i], (double)want);
+    }
+    size_t pixels = (size_t)h->width * h->height;
+    float *xyz = malloc(3 * pixels * sizeof(float));
+    uint8_t *valid = malloc(pixels);
+    CHECK(xyz && valid, "memory");
+    EXPECT_STATUS(dear_frame_point_cloud(frame, xyz, 3 * pixels, valid, pixels), DEAR_OK);
+    const float *depth = dear_frame_depth(frame, NULL);
+    size_t n_valid = 0, bent = 0;
+    double worst = 0.0;
+    for (uint32_t v = 0; v < h->height; v++) {
+        for (uint32_t u = 0; u < h->width; u++) {
+            size_t i = (size_t)v * h->width + u;
+            const float *p = xyz + 3 * i;
+            if (!(depth[i] > 0.0f && isfinite(depth[i]))) {
+                CHECK(valid[i] == 0 && isnan(p[2]), "pixel (%u, %u) without depth", u, v);
+                continue;
+            }
+            CHECK(valid[i] == 1 && p[2] == depth[i], "pixel (%u, %u): z is the depth", u, v);
+            double xd, yd;
+            distort(h->rgb_distortion, (double)p[0] / p[2], (double)p[1] / p[2], &xd, &yd);
+            double du = xd * h->rgb_fx + h->rgb_cx - u, dv = yd * h->rgb_fy + h->rgb_cy - v;
+            double e = fabs(du) > fabs(dv) ? fabs(du) : fabs(dv);
+            worst = e > worst ? e : worst;
+            /* How far the pinhole ray would have put the point, in pixels. */
+            double pu = (double)p[0] / p[2] * h->rgb_fx + h->rgb_cx - u;
+            bent += fabs(pu) > 0.5;
+            n_valid++;
+        }
+    }
+    CHECK(n_valid > 0, "valid pixels");
+    /* float32 points: a few thousandths of a pixel. */
+    CHECK(worst < 1e-3, "a point reprojects %g px from its pixel", worst);
+    CHECK(bent > n_valid / 10, "the distortion moved only %zu of %zu points", bent, n_valid);
+    printf("distorted: %zu points, worst reprojection %.2g px, %zu moved > 0.5 px\n", n_valid,
+           worst, bent);
+    free(xyz);
+    free(valid);
+    dear_frame_release(frame);
+    dear_client_free(client);
+    ok("distorted point cloud: the header's coefficients, every point back on its pixel");
+}
+
 int main(int argc, char **argv) {
+    if (argc == 8 && strcmp(argv[1], "distorted") == 0) {
+        distorted(argv[2], argv + 3);
+        printf("%d checks passed\n", checks);
+        return 0;
+    }
     if (argc != 3) {
         fprintf(stderr, "usage: %s arguments|timeout|frames|points SERVICE\n", argv[0]);
         return 2;

@@ -128,6 +128,11 @@ fn c_program(source: &'static str) -> PathBuf {
 /// A running `deard` replaying `samples/demo` in a loop at its recorded pace, alignment only,
 /// in the tests' root, once it serves.
 fn start_daemon(service: &str) -> Daemon {
+    start_daemon_on(service, &demo_capture())
+}
+
+/// [`start_daemon`] replaying another capture.
+fn start_daemon_on(service: &str, capture: &Path) -> Daemon {
     let mut command = Command::new(deard());
     command
         .args(["--service", service, "--refine", "none", "--loop"])
@@ -138,7 +143,7 @@ fn start_daemon(service: &str) -> Daemon {
             "1",
             "--replay",
         ])
-        .arg(demo_capture())
+        .arg(capture)
         .env(dear_proto::IOX2_ROOT_ENV, iox2_root().join("iceoryx2"));
     let mut daemon = Daemon::spawn_logging_to_temp(command);
     daemon.wait_for_log("serving", Duration::from_secs(60));
@@ -401,6 +406,43 @@ fn a_point_cloud_from_c_uses_the_captures_intrinsics() {
             (got - f64::from(want)).abs() < 1e-4,
             "header {name} {got}, capture.json {want}"
         );
+    }
+}
+
+/// A capture whose `capture.json` has a Brown–Conrady `distortion`: deard publishes it in the
+/// header (model 2, the coefficients), and the point cloud C gets undoes it: every valid
+/// point, projected back through the lens model in C, lands on its own pixel.
+#[test]
+fn a_distorted_cameras_point_cloud_reprojects_onto_its_pixels() {
+    iox2_root();
+    let c_api = c_program("tests/c_api.c");
+    let tmp = tempfile::tempdir().unwrap();
+    let capture = dear_test_support::capture::write_demo_copies(
+        &tmp.path().join("distorted"),
+        &[(0, true), (33_000_000, true), (66_000_000, true)],
+    );
+    let path = capture.join("capture.json");
+    let mut manifest =
+        dear_capture::CaptureManifest::from_json(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let coefficients = ["-0.2", "0.05", "0.001", "-0.0005", "0.01"];
+    manifest.distortion = Some(coefficients.map(|c| c.parse().unwrap()));
+    std::fs::write(&path, serde_json::to_string_pretty(&manifest).unwrap()).unwrap();
+
+    let service = unique_service("distorted");
+    let daemon = start_daemon_on(&service, &capture);
+    let mut args = vec!["distorted", service.as_str()];
+    args.extend(coefficients);
+    let output = run(&c_api, &args);
+    assert!(
+        output.status.success(),
+        "{}\ndeard log:\n{}",
+        describe(&output),
+        daemon.log_text()
+    );
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(stdout.contains("ok distorted point cloud"), "{stdout}");
+    if let Some(figures) = stdout.lines().find(|l| l.starts_with("distorted: ")) {
+        println!("{figures}");
     }
 }
 

@@ -290,11 +290,15 @@ impl FrameSource for ReplaySource {
         DepthLimit::of_manifest(self.dir.manifest())
     }
 
-    /// `capture.json`'s `intrinsics` (a pinhole: the capture format has no distortion), at the
-    /// manifest's size, which every frame has.
+    /// `capture.json`'s `intrinsics` and `distortion` (when it has one), at the manifest's size,
+    /// which every frame has.
     fn rgb_intrinsics(&self) -> Option<CameraIntrinsics> {
-        let k = self.dir.manifest().intrinsics;
-        Some(CameraIntrinsics::pinhole(k.fx, k.fy, k.cx, k.cy))
+        let m = self.dir.manifest();
+        let k = m.intrinsics;
+        Some(CameraIntrinsics {
+            distortion: m.distortion,
+            ..CameraIntrinsics::pinhole(k.fx, k.fy, k.cx, k.cy)
+        })
     }
 }
 

@@ -227,6 +227,7 @@ impl V4lSource {
         let mut manifest =
             CaptureManifest::new(module.rgb.width, module.rgb.height, module.rgb.intrinsics());
         manifest.initial_calibration = module.initial_calibration();
+        manifest.distortion = module.rgb.distortion;
         manifest.depth_scale = STORED_DEPTH_SCALE;
         if let Some(f) = config.tof.modulation_hz {
             manifest.modulation_frequencies_hz = vec![f];

@@ -103,6 +103,9 @@ class Manifest:
     modulation_frequencies_hz: list[float]
     source: dict | None
     frames: list[FrameEntry] = field(default_factory=list)
+    #: The RGB camera's Brown-Conrady distortion [k1, k2, p1, p2, k3] (OpenCV's order); None:
+    #: none (a pinhole). deard publishes it with the intrinsics in every frame header.
+    distortion: list[float] | None = None
 
     def to_json(self) -> dict:
         frames = []
@@ -117,6 +120,10 @@ class Manifest:
             "width": self.width,
             "height": self.height,
             "intrinsics": vars(self.intrinsics),
+        }
+        if self.distortion is not None:
+            d["distortion"] = [float(k) for k in self.distortion]
+        d |= {
             "initial_calibration": self.initial_calibration.to_dict(),
             "depth_scale": self.depth_scale,
             "modulation_frequencies_hz": self.modulation_frequencies_hz,
@@ -141,6 +148,9 @@ class Manifest:
             depth_scale=float(d["depth_scale"]),
             modulation_frequencies_hz=[float(f) for f in d.get("modulation_frequencies_hz", [])],
             source=d.get("source"),
+            distortion=(
+                None if d.get("distortion") is None else [float(k) for k in d["distortion"]]
+            ),
             frames=[
                 FrameEntry(e["id"], e["timestamp_ns"], calibration(e.get("perturbation")))
                 for e in d["frames"]
