@@ -5,10 +5,11 @@ x86-64, Debian's arm64 Python under qemu-user for aarch64), so it needs only the
 library, numpy and `dear`. Two commands:
 
   receive SERVICE OUT --timeout-s S
-      checks that `dear` is the installed wheel (not the checkout's package) and that frames
-      arrive with the documented shapes and dtypes, and saves each as OUT/RUNID-SEQ.npz; prints
-      "receiving" once the first frame is in, so the caller can start `dear dump`, and stops
-      after the frame that follows the caller's creating OUT/stop (when `dear dump` is done).
+      checks that `dear` is the installed wheel (not the checkout's package), that frames
+      arrive with the documented shapes and dtypes, and the first frame's point cloud; saves
+      each as OUT/RUNID-SEQ.npz; prints "receiving" once the first frame is in, so the caller
+      can start `dear dump`, and stops after the frame that follows the caller's creating
+      OUT/stop (when `dear dump` is done).
   compare OUT DUMP
       (the checkout's .venv: needs Pillow) every frame `dear dump` wrote into DUMP that the wheel
       also received must be equal plane for plane; at least two must match.
@@ -58,6 +59,8 @@ def receive(service: str, out: Path, timeout_s: float) -> None:
                     sys.exit(f"wheel_client: confidence {confidence.shape} {confidence.dtype}")
                 if depth.flags.writeable:
                     sys.exit("wheel_client: the depth view is writeable, not read-only")
+                if kept == 0:
+                    check_point_cloud(frame, depth)
                 np.savez(
                     out / f"{h.run_id:016x}-{h.sequence}.npz",
                     depth=depth,
@@ -68,6 +71,23 @@ def receive(service: str, out: Path, timeout_s: float) -> None:
                 print("receiving", flush=True)
             kept += 1
     print(f"kept {kept} frames", flush=True)
+
+
+def check_point_cloud(frame: object, depth: np.ndarray) -> None:
+    """The wheel's point cloud (the Rust SDK's back-projection): organised, valid exactly where
+    the depth is, z equal to the depth there, NaN elsewhere."""
+    cloud = frame.point_cloud(colors=True)  # type: ignore[attr-defined]
+    n = depth.size
+    if cloud.points.shape != (n, 3) or cloud.valid.shape != (n,) or cloud.colors.shape != (n, 3):
+        sys.exit(f"wheel_client: point cloud shapes {cloud.points.shape} {cloud.valid.shape}")
+    flat = depth.reshape(-1)
+    if not np.array_equal(cloud.valid, flat > 0) or not cloud.valid.any():
+        sys.exit("wheel_client: the point cloud's valid mask is not the valid depth")
+    if not np.array_equal(cloud.points[cloud.valid, 2], flat[cloud.valid]):
+        sys.exit("wheel_client: a valid point's z is not its depth")
+    if not np.isnan(cloud.points[~cloud.valid]).all():
+        sys.exit("wheel_client: an invalid pixel has a point")
+    print(f"point cloud: {int(cloud.valid.sum())} of {n} points valid", flush=True)
 
 
 def mm(depth: np.ndarray) -> np.ndarray:
