@@ -6,7 +6,7 @@
 //! Writing three PNGs per frame must not slow the capture: frames go to a writer thread through
 //! a short queue, and when the disk falls behind a frame is left out of the recording (counted,
 //! logged) rather than delaying the stream. The manifest is rewritten every
-//! [`MANIFEST_EVERY`] frames, so a recording cut short by a crash replays up to that point.
+//! `MANIFEST_EVERY` frames, so a recording cut short by a crash replays up to that point.
 
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{self, SyncSender, TrySendError};

@@ -6,7 +6,7 @@
 //! foreground and background wherever `t/z` of a near object exceeds the object's distance to
 //! its edge (measured on `dear-synth perturb --sigma 2` at 320×240: 37–55 cm MAE on some
 //! frames against 12–20 cm for this method) — every ToF pixel `q` at depth `z` is splatted
-//! forward to `q − W(z)` with a z-buffer ([`splat_depth_into`]), the same rule the simulator
+//! forward to `q − W(z)` with a z-buffer ([`splat_depth_into`](crate::geometry::splat::splat_depth_into)), the same rule the simulator
 //! and the training augmentation use to make the misaligned views. Pixels no surface reaches
 //! (disocclusions, the border the view moved away from) stay invalid (0).
 

@@ -10,7 +10,7 @@
 //! `v >= code_for_error(0.05)` keeps those expected within 5 cm. The reliability table in
 //! RESULTS.md measures how well the predicted errors hold on data the refiner never saw.
 //!
-//! Without the flag the byte is the heuristic score of `dear_pipeline::dear::confidence`
+//! Without the flag the byte is the heuristic score of `dear_pipeline::chain::confidence`
 //! (support × agreement; 0 = no depth, 255 = measured on a smooth surface and kept).
 //!
 //! [`flags::CONFIDENCE_EXPECTED_ERROR`]: crate::flags::CONFIDENCE_EXPECTED_ERROR

@@ -180,7 +180,7 @@ impl State {
         }
     }
 
-    /// Frames per second over the last [`FPS_WINDOW`]: intervals between the arrivals in it
+    /// Frames per second over the last `FPS_WINDOW`: intervals between the arrivals in it
     /// over their span; 0 when fewer than two frames came in it.
     pub fn fps(&mut self, now: Instant) -> f64 {
         self.trim_arrivals(now);

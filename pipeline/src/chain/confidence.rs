@@ -62,7 +62,7 @@ pub fn expected_error_confidence_into(
 /// Writes the confidence of `refined` given the refinement input `warped` into `out`.
 ///
 /// Rows run in parallel on flat slices (non-contiguous inputs are copied once into standard
-/// layout); see [`confidence_row`].
+/// layout); see `confidence_row`.
 ///
 /// # Panics
 /// If the three images do not share one shape.

@@ -241,7 +241,7 @@ pub enum ChainError {
 /// [`process`](Self::process) runs one after the other. The refine graph runs on one core, so
 /// a caller that has the next frame already can [`finish_and_prepare`](Self::finish_and_prepare):
 /// this frame's second half beside the next frame's first half, on the other core. The halves
-/// write separate buffers ([`Staged`] is double-buffered), so the output is the same bits
+/// write separate buffers (`Staged` is double-buffered), so the output is the same bits
 /// either way.
 #[derive(Debug)]
 pub struct DearChain {

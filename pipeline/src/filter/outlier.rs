@@ -54,7 +54,7 @@ fn median(values: &mut [f32]) -> f32 {
 
 /// Writes `depth` into `out`, with every valid pixel that is not on the surface of the median
 /// of its valid 3 × 3 neighbourhood (itself included; at least
-/// [`MIN_VALID_NEIGHBOURS`] valid) replaced by that median. `replaced` flags those pixels.
+/// `MIN_VALID_NEIGHBOURS` valid) replaced by that median. `replaced` flags those pixels.
 /// Invalid pixels stay invalid (`0`).
 ///
 /// # Panics

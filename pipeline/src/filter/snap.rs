@@ -2,7 +2,7 @@
 //!
 //! A depth value is *on a surface* at a pixel when some valid reference depth within a small
 //! window lies within the same-surface tolerance of it
-//! ([`same_surface`](crate::geometry::surface::same_surface)). A value that is on no nearby
+//! ([`same_surface`]). A value that is on no nearby
 //! surface floats in mid-air, between a foreground and a background: a flying pixel. The
 //! classical refiner uses this rule twice: to move the flying pixels of the input onto the
 //! neighbouring surface nearest in depth, and after smoothing, so that averaging across a

@@ -119,7 +119,7 @@ fn splat_taps(tx: f32, ty: f32, h: usize, w: usize) -> impl Iterator<Item = ((us
 ///
 /// The depth-only path ([`splat_depth_with`], the daemon's per-frame alignment) keeps its own
 /// buffers: the landing point of every source pixel, computed once, and the passes run per band
-/// of target rows in parallel (see [`SplatScratch::resolve`]).
+/// of target rows in parallel (see `SplatScratch::resolve`).
 #[derive(Debug, Clone, Default)]
 pub struct SplatScratch {
     zbuf: Vec<f32>,
@@ -234,7 +234,7 @@ const NO_CELL: i32 = i32::MIN;
 ///
 /// Taps of weight ≤ [`SPLAT_MIN_WEIGHT`] are *not* filtered out when all four taps of a cell
 /// are inside the band: `f` must give them no effect itself, with selects rather than
-/// branches (see [`SplatScratch::resolve`]). Outside that common case only taps above the
+/// branches (see `SplatScratch::resolve`). Outside that common case only taps above the
 /// threshold are passed.
 #[inline(always)]
 fn band_taps(
