@@ -111,6 +111,9 @@ struct Ports {
     _events: FrameEventService,
     /// The files new clients need, checked every second.
     files: ServiceFiles,
+    /// The names of the frame and event services' records
+    /// ([`transport_guard::ServiceRecordNames`]).
+    records: transport_guard::ServiceRecordNames,
 }
 
 /// The daemon's publishing end of one frame service.
@@ -128,6 +131,10 @@ pub struct FramePublisher {
     sequence: Cell<u64>,
     /// `None` while the transport cannot be made again (logged; retried every second).
     ports: RefCell<Option<Ports>>,
+    /// Damage to the services' shared records seen at the last check ([`RecordCheck`]).
+    records: RefCell<RecordCheck>,
+    /// The names of the services' records as last made (kept while `ports` is `None`).
+    record_names: transport_guard::ServiceRecordNames,
 }
 
 impl FramePublisher {
@@ -152,7 +159,9 @@ impl FramePublisher {
                 service: name.to_string(),
                 source,
             })?;
+        transport_guard::survive_truncated_records();
         let ports = open_ports(&config, &root, name, layout)?;
+        let record_names = ports.records.clone();
         refuse_a_second_publisher(&root, &ports.frames, ports.publisher.id(), name)?;
         let run_id = dear_proto::random_run_id().map_err(|source| PublisherError::RunId {
             service: name.to_string(),
@@ -167,6 +176,8 @@ impl FramePublisher {
             run_id,
             sequence: Cell::new(0),
             ports: RefCell::new(Some(ports)),
+            records: RefCell::new(RecordCheck::default()),
+            record_names,
         })
     }
 
@@ -174,21 +185,43 @@ impl FramePublisher {
     /// from the root, repairs a damaged node counter, and when a file new clients need was deleted (`rm -rf` of the root, a
     /// tmpfs cleaner), makes the service again under the same run id, logging why. Running
     /// clients keep the old files mapped and stop receiving; new clients (and clients that
-    /// connect again) find the new service.
+    /// connect again) find the new service. The same when a client damaged the services'
+    /// shared records (`*.dynamic`) at two checks in a row ([`RecordCheck`]): their old files
+    /// are removed first, or the new node would open them again.
     pub fn check_transport(&self) {
         // A link swapped in while serving: iceoryx2 would follow it when it makes or removes
         // a node's directory (a client joining or a dead one cleaned up).
         transport_guard::remove_symlinks(&self.root);
         transport_guard::repair_global_mgmt(&self.root);
         let mut ports = self.ports.borrow_mut();
+        let mut damaged = Vec::new();
         if let Some(p) = ports.as_ref() {
-            let Some(missing) = p.files.missing() else {
+            // Issue 34: clients that died (a client whose connection another member scribbled
+            // on aborts) leave their nodes registered in the services until someone cleans
+            // them up; left alone they fill the services' node slots and keep new clients
+            // out (`ExceedsMaxNumberOfNodes`).
+            log_cleanup(p.node.try_cleanup_dead_nodes(), "while serving");
+            if let Some(missing) = p.files.missing() {
+                tracing::error!(file = %missing.display(), root = %self.root.display(), service = %self.name, "a file of the transport was deleted: no new client could find the service; making it again");
+            } else if let Some(why) = self.records.borrow_mut().check(p, &self.root) {
+                damaged = transport_guard::service_records(&self.root, &p.records);
+                tracing::error!(reason = %why, files = ?damaged, service = %self.name, "a client damaged the service's shared records: new clients could not use them; making the service again");
+            } else {
                 return;
-            };
-            tracing::error!(file = %missing.display(), root = %self.root.display(), service = %self.name, "a file of the transport was deleted: no new client could find the service; making it again");
+            }
         }
         // The old ports go first: their node would otherwise count as a second publisher.
         *ports = None;
+        // Dropping the ports removed them already where no client holds the old service.
+        for file in damaged {
+            if let Err(e) = std::fs::remove_file(&file).or_else(|e| match e.kind() {
+                std::io::ErrorKind::NotFound => Ok(()),
+                _ => Err(e),
+            }) {
+                tracing::warn!(file = %file.display(), error = %e, "cannot remove a damaged record of the service");
+            }
+        }
+        *self.records.borrow_mut() = RecordCheck::default();
         let reopened = dear_proto::transport::prepare_root(&self.config)
             .map_err(|e| e.to_string())
             .and_then(|_| {
@@ -201,7 +234,23 @@ impl FramePublisher {
                 *ports = Some(p);
             }
             Err(e) => {
-                tracing::error!(error = %e, service = %self.name, "cannot make the transport's files again; frames are not published until it can (retried every second)")
+                tracing::error!(error = %e, service = %self.name, "cannot make the transport's files again; frames are not published until it can (retried every second)");
+                // Issue 34: a client may have made the service meanwhile (clients open or
+                // create it) and damaged its records, or damaged them again while the daemon
+                // made them: the static records go (they are named by the service, which
+                // does not change), so the next try makes a new service beside the damaged
+                // one. Its clients connect again.
+                for file in transport_guard::static_records(&self.root, &self.record_names) {
+                    match std::fs::remove_file(&file) {
+                        Ok(()) => {
+                            tracing::warn!(file = %file.display(), service = %self.name, "removed the service's static record: the next try makes a new service")
+                        }
+                        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                        Err(e) => {
+                            tracing::warn!(file = %file.display(), error = %e, "cannot remove the service's static record")
+                        }
+                    }
+                }
             }
         }
     }
@@ -339,6 +388,16 @@ fn open_ports(
         ],
         publisher_id,
     );
+    let records = transport_guard::ServiceRecordNames {
+        hashes: [
+            frames.service_hash().as_str().to_string(),
+            events.service_hash().as_str().to_string(),
+        ],
+        ids: [
+            frames.unique_service_id().value(),
+            events.unique_service_id().value(),
+        ],
+    };
     Ok(Ports {
         node,
         publisher,
@@ -346,7 +405,128 @@ fn open_ports(
         frames,
         _events: events,
         files,
+        records,
     })
+}
+
+/// Issue 34: notices a client's damage to the services' shared records (`*.dynamic`, which
+/// every client must write to register its ports). The patched iceoryx2 (third_party/) no
+/// longer lets any bytes there crash the daemon: a corrupted container header is refused
+/// (and counted, `iceoryx2_bb_lock_free::dear_shared::corruptions`), and the publisher keeps
+/// serving the clients it knows. But new clients would find the records unusable, so the
+/// daemon checks them every second and makes the service again when, at two checks in a row
+/// (a client registering a port is briefly half-written), one of these holds:
+///
+/// - a header was refused, or a truncated record replaced by zeros
+///   ([`transport_guard::survive_truncated_records`]), since the last check;
+/// - the daemon's own publisher or notifier is not listed;
+/// - a listed port's node has no directory under `nodes/` (a client's node directory is made
+///   before its ports and removed after them), or a registered node is undefined (its id
+///   names no node);
+/// - the count of taken slots differs from the count of listed ports;
+/// - a record's version stamp was overwritten (new clients are refused with
+///   `VersionMismatch`).
+#[derive(Debug, Default)]
+struct RecordCheck {
+    corruptions: u64,
+    suspect: Option<String>,
+}
+
+impl RecordCheck {
+    /// The damage seen now and at the previous check, if any.
+    fn check(&mut self, ports: &Ports, root: &std::path::Path) -> Option<String> {
+        let now = damage(ports, root, &mut self.corruptions);
+        match (self.suspect.take(), now) {
+            (Some(_), Some(why)) => Some(why),
+            (None, Some(why)) => {
+                tracing::debug!(reason = %why, "the service's shared records look damaged; checking again in a second");
+                self.suspect = Some(why);
+                None
+            }
+            (_, None) => None,
+        }
+    }
+}
+
+/// What is wrong with the records now, if anything (see [`RecordCheck`]).
+fn damage(ports: &Ports, root: &std::path::Path, corruptions: &mut u64) -> Option<String> {
+    let nodes = root.join("nodes");
+    let missing_node = |id: &iceoryx2::identifiers::UniqueNodeId| -> bool {
+        std::fs::symlink_metadata(nodes.join(id.value().to_string())).is_err()
+    };
+    let mut why = None;
+    let frames = ports.frames.dynamic_config();
+    let (mut own, mut listed, mut orphan) = (false, 0usize, false);
+    frames.list_publishers(|d| {
+        own |= d.publisher_id == ports.publisher.id();
+        orphan |= missing_node(&d.node_id);
+        CallbackProgression::Continue
+    });
+    if !own {
+        why = Some("the daemon's publisher is not listed".to_string());
+    }
+    frames.list_subscribers(|d| {
+        listed += 1;
+        orphan |= missing_node(&d.node_id);
+        CallbackProgression::Continue
+    });
+    if listed != frames.number_of_subscribers() {
+        why.get_or_insert(format!(
+            "{listed} subscribers listed in {} slots",
+            frames.number_of_subscribers()
+        ));
+    }
+    let events = ports._events.dynamic_config();
+    let (mut own, mut listed) = (false, 0usize);
+    events.list_notifiers(|d| {
+        own |= d.notifier_id == ports.notifier.id();
+        orphan |= missing_node(&d.node_id);
+        CallbackProgression::Continue
+    });
+    if !own {
+        why.get_or_insert("the daemon's notifier is not listed".to_string());
+    }
+    events.list_listeners(|d| {
+        listed += 1;
+        orphan |= missing_node(&d.node_id);
+        CallbackProgression::Continue
+    });
+    if listed != events.number_of_listeners() {
+        why.get_or_insert(format!(
+            "{listed} listeners listed in {} slots",
+            events.number_of_listeners()
+        ));
+    }
+    if orphan {
+        why.get_or_insert("a listed port's node does not exist".to_string());
+    }
+    // A registered node that is neither alive nor dead (its id is junk: no node of that id
+    // exists) takes a node slot no cleanup frees.
+    let mut undefined = 0usize;
+    let mut count = |state: NodeState<Transport>| {
+        if matches!(state, NodeState::Undefined(_)) {
+            undefined += 1;
+        }
+        CallbackProgression::Continue
+    };
+    let _ = ports.frames.nodes(&mut count);
+    let _ = ports._events.nodes(&mut count);
+    if undefined > 0 {
+        why.get_or_insert(format!("{undefined} registered nodes that do not exist"));
+    }
+    if let Some(file) = transport_guard::record_with_a_bad_stamp(root, &ports.records) {
+        why.get_or_insert(format!("{} has a wrong version stamp", file.display()));
+    }
+    let seen =
+        iceoryx2_bb_lock_free::dear_shared::corruptions() + transport_guard::truncated_records();
+    if seen != *corruptions {
+        why.get_or_insert(format!(
+            "{} corrupted or truncated shared records",
+            seen - *corruptions
+        ));
+        *corruptions = seen;
+    }
+    why
 }
 
 /// Logs what a dead-node cleanup did, when it did anything.

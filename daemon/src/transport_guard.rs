@@ -198,6 +198,113 @@ pub fn repair_global_mgmt(root: &Path) -> Vec<PathBuf> {
     repaired
 }
 
+static TRUNCATED: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// Issue 34: a member of the service's group can truncate a shared record the daemon has
+/// mapped (`truncate -s0 *.connection`; clients must be able to write those files, and
+/// write permission is what `ftruncate` needs); the daemon's next access to the lost pages
+/// raised SIGBUS and killed it. This installs a SIGBUS handler that, when the faulting
+/// address lies in a mapping of such a record (the patched iceoryx2 registers them:
+/// `iceoryx2_bb_lock_free::dear_shared`), maps private zero pages over that whole mapping and
+/// returns: the access is retried and reads zeros, which the patched iceoryx2 refuses as a
+/// corrupted record, and the daemon makes the service again ([`truncated_records`] counts
+/// the repairs). A fault anywhere else gets the default action (the process dies, as
+/// before). The same technique Wayland compositors use against clients that shrink a shared
+/// memory pool.
+pub fn survive_truncated_records() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // SAFETY: a zeroed sigaction with a SA_SIGINFO handler and an empty mask is valid;
+        // the handler only calls async-signal-safe functions (atomics, mmap, signal).
+        unsafe {
+            let mut action: libc::sigaction = std::mem::zeroed();
+            action.sa_sigaction = on_sigbus as *const () as usize;
+            action.sa_flags = libc::SA_SIGINFO;
+            libc::sigemptyset(&mut action.sa_mask);
+            if libc::sigaction(libc::SIGBUS, &action, std::ptr::null_mut()) != 0 {
+                tracing::warn!(error = %io::Error::last_os_error(), "cannot install the SIGBUS handler: a client that truncates a shared record crashes the daemon");
+            }
+        }
+    });
+}
+
+/// How many truncated shared records [`survive_truncated_records`] replaced by zeros.
+pub fn truncated_records() -> u64 {
+    TRUNCATED.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+extern "C" fn on_sigbus(_: libc::c_int, info: *mut libc::siginfo_t, _: *mut libc::c_void) {
+    // SAFETY: the kernel passes a valid siginfo for a SA_SIGINFO handler.
+    let address = unsafe { (*info).si_addr() } as usize;
+    if let Some((start, end)) = iceoryx2_bb_lock_free::dear_shared::mapping_of(address) {
+        // SAFETY: replaces pages of a mapping this process made (registered by iceoryx2)
+        // with private zero pages of the same extent; nothing else lives there.
+        let mapped = unsafe {
+            libc::mmap(
+                start as *mut libc::c_void,
+                end - start,
+                libc::PROT_READ | libc::PROT_WRITE,
+                libc::MAP_PRIVATE | libc::MAP_ANONYMOUS | libc::MAP_FIXED,
+                -1,
+                0,
+            )
+        };
+        if mapped != libc::MAP_FAILED {
+            TRUNCATED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            return;
+        }
+    }
+    // Not a shared record: the default action when the access is retried.
+    // SAFETY: signal is async-signal-safe.
+    unsafe { libc::signal(libc::SIGBUS, libc::SIG_DFL) };
+}
+
+/// How iceoryx2 names a service's records: `services/iox2_<hash>.service` (its static
+/// record) and `iox2_<service id>.dynamic` in the root (its dynamic record, where every
+/// participant registers its ports).
+#[derive(Debug, Clone)]
+pub struct ServiceRecordNames {
+    pub hashes: [String; 2],
+    pub ids: [u128; 2],
+}
+
+/// The shared records of the services `names` (removed before the daemon makes the services
+/// again after a client damaged them, or its new node would open the old ones).
+pub fn service_records(root: &Path, names: &ServiceRecordNames) -> Vec<PathBuf> {
+    let ids: Vec<String> = names
+        .ids
+        .iter()
+        .map(|id| format!("_{id}.dynamic"))
+        .collect();
+    let mut files = files_named(root, |n| ids.iter().any(|id| n.ends_with(id.as_str())));
+    files.extend(static_records(root, names));
+    files
+}
+
+/// The static records of the services `names` in `services/` (named by the service's hash,
+/// the same for every service of that name and configuration).
+pub fn static_records(root: &Path, names: &ServiceRecordNames) -> Vec<PathBuf> {
+    files_named(&root.join("services"), |n| {
+        names.hashes.iter().any(|h| n.contains(h.as_str()))
+    })
+}
+
+/// The first of the services' `*.dynamic` records (see [`service_records`]) whose version
+/// stamp (its first 8 bytes, written by iceoryx2 when it made the record) is not iceoryx2's:
+/// a client overwrote it, and every new client is refused with `VersionMismatch`.
+pub fn record_with_a_bad_stamp(root: &Path, names: &ServiceRecordNames) -> Option<PathBuf> {
+    let stamp = iceoryx2_version().to_ne_bytes();
+    service_records(root, names)
+        .into_iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "dynamic"))
+        .find(|p| {
+            let mut head = [0u8; 8];
+            open_regular_nofollow(p, false)
+                .and_then(|f| f.read_exact_at(&mut head, 0))
+                .is_ok_and(|()| head != stamp)
+        })
+}
+
 /// Files without which no new client can find the service: the root, the static service
 /// records, the data segment and the node counter. Checked every second by the daemon.
 #[derive(Debug, Clone)]
@@ -270,6 +377,42 @@ mod tests {
         std::fs::write(&path, [1u8; 3]).unwrap();
         assert_eq!(repair_global_mgmt(tmp.path()), vec![path.clone()]);
         assert_eq!(std::fs::read(&path).unwrap().len(), 16);
+    }
+
+    #[test]
+    fn a_service_record_with_an_overwritten_stamp_is_named() {
+        let tmp = tempfile::tempdir().unwrap();
+        let root = tmp.path();
+        std::fs::create_dir(root.join("services")).unwrap();
+        let names = ServiceRecordNames {
+            hashes: ["aaa".into(), "bbb".into()],
+            ids: [17, 42],
+        };
+        let mut good = iceoryx2_version().to_ne_bytes().to_vec();
+        good.extend_from_slice(&[0; 64]);
+        std::fs::write(root.join("iox2_p_17.dynamic"), &good).unwrap();
+        std::fs::write(root.join("iox2_p_42.dynamic"), &good).unwrap();
+        std::fs::write(root.join("iox2_p_7.dynamic"), [0xA5u8; 72]).unwrap();
+        std::fs::write(root.join("services/iox2_aaa.service"), "x").unwrap();
+        std::fs::write(root.join("services/iox2_ccc.service"), "x").unwrap();
+        let mut records = service_records(root, &names);
+        records.sort();
+        assert_eq!(
+            records,
+            vec![
+                root.join("iox2_p_17.dynamic"),
+                root.join("iox2_p_42.dynamic"),
+                root.join("services/iox2_aaa.service"),
+            ]
+        );
+        assert_eq!(record_with_a_bad_stamp(root, &names), None);
+        let mut bad = good.clone();
+        bad[3] ^= 0x10;
+        std::fs::write(root.join("iox2_p_42.dynamic"), &bad).unwrap();
+        assert_eq!(
+            record_with_a_bad_stamp(root, &names),
+            Some(root.join("iox2_p_42.dynamic"))
+        );
     }
 
     #[test]
