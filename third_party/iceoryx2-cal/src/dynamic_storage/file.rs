@@ -266,6 +266,22 @@ impl<T: Send + Sync + Debug + ZeroCopySend> Builder<'_, T> {
             }
         };
 
+        // DEAR PATCH: the mapping is in the table of shared ranges before its first byte is
+        // read (the version below): another process may truncate the file meanwhile, and the
+        // SIGBUS a read then raises is survivable only for a registered range (DEAR's daemon
+        // maps zero pages over it). Unregistered again on every early return.
+        struct DearRange(usize);
+        impl Drop for DearRange {
+            fn drop(&mut self) {
+                iceoryx2_bb_lock_free::dear_shared::unregister(self.0);
+            }
+        }
+        let dear_range = iceoryx2_bb_lock_free::dear_shared::register(
+            memory_mapping.base_address() as usize,
+            memory_mapping.size(),
+        )
+        .then(|| DearRange(memory_mapping.base_address() as usize));
+
         let init_state = memory_mapping.base_address() as *const Data<T>;
 
         loop {
@@ -300,6 +316,8 @@ impl<T: Send + Sync + Debug + ZeroCopySend> Builder<'_, T> {
                                     "{} since the adaptive wait call failed.", msg);
         }
 
+        // DEAR PATCH: the storage registers its range itself from here on.
+        drop(dear_range);
         Ok(Storage {
             file,
             memory_mapping,
