@@ -106,8 +106,11 @@ for arch in "${arches[@]}"; do
             step "x86_64: $wheel into a fresh venv"
             python3.11 -m venv "$scratch/venv"
             "$scratch/venv/bin/pip" install --quiet "$wheel"
-            cargo build --quiet -p deard -p dear-cli --bin deard --bin dear
-            run_client x86_64 target/debug/deard target/debug/dear \
+            # The install tier's release build, by the same command (nothing rebuilt in
+            # scripts/test.sh; a debug build of these two packages alone would unify features
+            # differently and rebuild much of the tree).
+            cargo build --release --quiet -p deard -p dear-cli
+            run_client x86_64 target/release/deard target/release/dear \
                 "$scratch/venv/bin/python" ;;
         aarch64)
             fetch_arm64_python
