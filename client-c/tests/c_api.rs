@@ -165,6 +165,19 @@ fn run(binary: &Path, args: &[&str]) -> Output {
     child.wait_with_output().unwrap()
 }
 
+/// [`run`] against a running daemon: the program must succeed (else its output and the
+/// daemon's log are shown); returns its stdout.
+fn run_against(daemon: &Daemon, binary: &Path, args: &[&str]) -> String {
+    let output = run(binary, args);
+    assert!(
+        output.status.success(),
+        "{}\ndeard log:\n{}",
+        describe(&output),
+        daemon.log_text()
+    );
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
 fn describe(output: &Output) -> String {
     format!(
         "{}\nstdout:\n{}\nstderr:\n{}",
@@ -381,14 +394,7 @@ fn a_point_cloud_from_c_uses_the_captures_intrinsics() {
     let c_api = c_program("tests/c_api.c");
     let service = unique_service("points");
     let daemon = start_daemon(&service);
-    let output = run(&c_api, &["points", &service]);
-    assert!(
-        output.status.success(),
-        "{}\ndeard log:\n{}",
-        describe(&output),
-        daemon.log_text()
-    );
-    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stdout = run_against(&daemon, &c_api, &["points", &service]);
     assert!(stdout.contains("ok point cloud"), "{stdout}");
     let manifest = std::fs::read_to_string(demo_capture().join("capture.json")).unwrap();
     let k = dear_capture::CaptureManifest::from_json(&manifest)
@@ -432,14 +438,7 @@ fn a_distorted_cameras_point_cloud_reprojects_onto_its_pixels() {
     let daemon = start_daemon_on(&service, &capture);
     let mut args = vec!["distorted", service.as_str()];
     args.extend(coefficients);
-    let output = run(&c_api, &args);
-    assert!(
-        output.status.success(),
-        "{}\ndeard log:\n{}",
-        describe(&output),
-        daemon.log_text()
-    );
-    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stdout = run_against(&daemon, &c_api, &args);
     assert!(stdout.contains("ok distorted point cloud"), "{stdout}");
     if let Some(figures) = stdout.lines().find(|l| l.starts_with("distorted: ")) {
         println!("{figures}");
@@ -452,14 +451,7 @@ fn frames_are_zero_copy_and_at_most_two_are_held() {
     let c_api = c_program("tests/c_api.c");
     let service = unique_service("frames");
     let daemon = start_daemon(&service);
-    let output = run(&c_api, &["frames", &service]);
-    assert!(
-        output.status.success(),
-        "{}\ndeard log:\n{}",
-        describe(&output),
-        daemon.log_text()
-    );
-    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stdout = run_against(&daemon, &c_api, &["frames", &service]);
     for check in [
         "ok frames: header and planes",
         "ok a third held frame: DEAR_TOO_MANY_FRAMES_HELD",
