@@ -80,13 +80,7 @@ run_client() {
     "$@" tests/scripts/wheel_client.py receive "$service" "$out/received" --timeout-s 300 \
         >"$out/client.log" 2>&1 &
     local client_pid=$!
-    for _ in $(seq 1200); do
-        grep -q '^receiving' "$out/client.log" && break
-        kill -0 "$client_pid" 2>/dev/null || break
-        sleep 0.1
-    done
-    grep -q '^receiving' "$out/client.log" \
-        || fail "the $arch wheel received no frame: $(cat "$out/client.log" "$out/deard.log")"
+    wait_for_line "$client_pid" "$out/client.log" '^receiving' 120 "the $arch wheel's client"
     "${runner[@]}" "$dear" dump --service "$service" --count 3 --timeout-s 120 --out "$out/dump" \
         >"$out/dump.log" 2>&1 || fail "the $arch dear dump failed: $(cat "$out/dump.log")"
     touch "$out/received/stop"

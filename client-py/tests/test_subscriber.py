@@ -21,8 +21,8 @@ from pathlib import Path
 
 import dear
 import numpy as np
-import numpy.typing as npt
 import pytest
+from dear_train.data.capture import depth_to_u16
 from PIL import Image
 
 REPO = Path(__file__).resolve().parents[2]
@@ -272,15 +272,6 @@ def test_invalid_service_raises_connect_error(service: str) -> None:
     assert "contains ' '" in str(info.value)
 
 
-def mm(depth: npt.NDArray[np.float32]) -> npt.NDArray[np.uint16]:
-    """Depth in millimetres as `dear dump` writes it: f32 z / 0.001 rounded half away from
-    zero, 0 where invalid, saturating at 65535."""
-    x = depth / np.float32(0.001)
-    floor = np.floor(x)
-    rounded = np.where(x - floor >= 0.5, floor + 1, floor)
-    return np.where(depth > 0, np.clip(rounded, 0, 65535), 0).astype(np.uint16)
-
-
 def test_depth_matches_dear_dump(service: str, tmp_path: Path) -> None:
     require_binary(DEAR)
     out = tmp_path / "dump"
@@ -307,7 +298,8 @@ def test_depth_matches_dear_dump(service: str, tmp_path: Path) -> None:
                 extra += 1  # a few frames past dump's last
         output, _ = dump.communicate(timeout=60)
     assert dump.returncode == 0, output
-    published = json.loads((out / "capture.json").read_text())["source"]["published_frames"]
+    manifest = json.loads((out / "capture.json").read_text())
+    published = manifest["source"]["published_frames"]
     assert len(published) == 3
     matched = 0
     for record in published:
@@ -316,7 +308,11 @@ def test_depth_matches_dear_dump(service: str, tmp_path: Path) -> None:
             continue
         depth, rgb, conf = received[key]
         stem = out / "frames" / f"{record['id']:06d}"
-        np.testing.assert_array_equal(mm(depth), np.asarray(Image.open(f"{stem}.depth.png")))
+        # The capture writer's depth conversion, whose Python twin is dear_train's.
+        np.testing.assert_array_equal(
+            depth_to_u16(depth, manifest["depth_scale"]),
+            np.asarray(Image.open(f"{stem}.depth.png")),
+        )
         np.testing.assert_array_equal(rgb, np.asarray(Image.open(f"{stem}.rgb.png")))
         # dump writes confidence × 257 as the amplitude plane.
         amp = np.asarray(Image.open(f"{stem}.amp.png")).astype(np.uint32)

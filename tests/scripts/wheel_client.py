@@ -11,7 +11,8 @@ library, numpy and `dear`. Two commands:
       can start `dear dump`, and stops after the frame that follows the caller's creating
       OUT/stop (when `dear dump` is done).
   compare OUT DUMP
-      (the checkout's .venv: needs Pillow) every frame `dear dump` wrote into DUMP that the wheel
+      (the checkout's .venv: needs Pillow and dear_train, whose depth_to_u16 is the dump's
+      depth conversion) every frame `dear dump` wrote into DUMP that the wheel
       also received must be equal plane for plane; at least two must match.
 """
 
@@ -90,18 +91,12 @@ def check_point_cloud(frame: object, depth: np.ndarray) -> None:
     print(f"point cloud: {int(cloud.valid.sum())} of {n} points valid", flush=True)
 
 
-def mm(depth: np.ndarray) -> np.ndarray:
-    """Depth in millimetres as `dear dump` writes it (client-py/tests/test_subscriber.py)."""
-    x = depth / np.float32(0.001)
-    floor = np.floor(x)
-    rounded = np.where(x - floor >= 0.5, floor + 1, floor)
-    return np.where(depth > 0, np.clip(rounded, 0, 65535), 0).astype(np.uint16)
-
-
 def compare(out: Path, dump: Path) -> None:
+    from dear_train.data.capture import depth_to_u16
     from PIL import Image
 
-    published = json.loads((dump / "capture.json").read_text())["source"]["published_frames"]
+    manifest = json.loads((dump / "capture.json").read_text())
+    published = manifest["source"]["published_frames"]
     matched = 0
     for record in published:
         received = out / f"{int(record['run_id'], 16):016x}-{record['sequence']}.npz"
@@ -110,7 +105,9 @@ def compare(out: Path, dump: Path) -> None:
         planes = np.load(received)
         stem = dump / "frames" / f"{record['id']:06d}"
         np.testing.assert_array_equal(
-            mm(planes["depth"]), np.asarray(Image.open(f"{stem}.depth.png")), err_msg=str(stem)
+            depth_to_u16(planes["depth"], manifest["depth_scale"]),
+            np.asarray(Image.open(f"{stem}.depth.png")),
+            err_msg=str(stem),
         )
         np.testing.assert_array_equal(
             planes["rgb"], np.asarray(Image.open(f"{stem}.rgb.png")), err_msg=str(stem)
