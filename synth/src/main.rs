@@ -12,7 +12,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use dear_synth::dataset::{generate, GenerateParams};
 use dear_synth::family::{shard_dir_name, Family};
-use dear_synth::perturb::{perturb_dir, PerturbMode};
+use dear_synth::perturb::{perturb_dir, PerturbMode, ViewSource};
 use dear_synth::preview::panel;
 use dear_synth::scene::SceneConfig;
 use dear_synth::sequence::{generate_sequence, DriftParams, SequenceParams};
@@ -81,6 +81,11 @@ enum Command {
         baseline: f64,
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// How the RGB view is made: rendered again from each frame's scene (captures this
+        /// simulator wrote) or splatted from the aligned RGB (any capture with ground truth;
+        /// leaves disocclusions black).
+        #[arg(long, value_enum, default_value_t = ViewSource::Render)]
+        view: ViewSource,
     },
     /// Render a moving scene with drifting calibration.
     Sequence {
@@ -254,6 +259,7 @@ fn main() -> Result<()> {
             uniform,
             baseline,
             seed,
+            view,
         } => {
             let mode = if uniform {
                 PerturbMode::paper_uniform(baseline)
@@ -261,7 +267,7 @@ fn main() -> Result<()> {
                 PerturbMode::Gaussian { sigma_px: sigma }
             };
             let pb = bar(0, "perturb");
-            perturb_dir(&input, &out, &mode, seed, |i, n| {
+            perturb_dir(&input, &out, &mode, seed, view, |i, n| {
                 pb.set_length(n as u64);
                 pb.set_position(i as u64);
             })?;

@@ -3,8 +3,11 @@
 //! A perturbation `P = (t_x, t_y, c_x, c_y)` means: in the new RGB view, RGB pixel `p` sees ToF
 //! pixel `p + W(p)` with `W(p) = (t_x / z(p) + c_x, t_y / z(p) + c_y)` (`dear_pipeline`'s flow
 //! convention). The ToF amplitude and depth stay as rendered; the RGB image, the ground-truth
-//! depth and the mask are replaced by the view `dear_pipeline::geometry::synthesize_view`
-//! splats with a z-buffer, and the flow is written as `.flow.flo`.
+//! depth and the mask are replaced by the RGB camera's view, and the flow is written as
+//! `.flow.flo`. The view is rendered again from the scene ([`apply_rendered`], the default for
+//! captures this simulator wrote: what a camera sees, no holes) or splatted from the aligned
+//! RGB with a z-buffer ([`apply`], `dear_pipeline::geometry::synthesize_view`: disocclusions
+//! and borders stay black, a contour cue no camera gives).
 //!
 //! How σ is applied (the Table 1 protocol, "perturbations ~ N(0, σ)"), per frame, independently
 //! per axis:
@@ -21,14 +24,19 @@
 use std::path::Path;
 
 use anyhow::{ensure, Context, Result};
-use dear_capture::{Calibration, CaptureDir, CaptureWriter, GroundTruth, RgbdFrame, Sample};
+use dear_capture::{Calibration, CaptureDir, CaptureWriter, Flow, GroundTruth, RgbdFrame, Sample};
 use dear_pipeline::geometry::synthesize_view;
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
+use ndarray::Array2;
+
+use crate::dataset::GenerateParams;
 use crate::rng::{keyed_rng, Stream};
+use crate::scene::Scene;
+use crate::simulate::{render_rgb_view, SimConfig};
 
 /// How perturbations are drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -146,16 +154,112 @@ pub fn apply(sample: &Sample, p: Calibration) -> Result<Sample> {
     })
 }
 
+/// How far (relative) the ToF view's ground truth at `q + W(q)` may lie from the RGB view's at
+/// `q` for the point to count as seen by both cameras: a z-buffer test's tolerance, loose
+/// enough for the nearest-pixel lookup on a slanted surface (4 % is ~25° of slant over one
+/// pixel at 320 px across 70°), tight enough to reject a surface in front of it.
+const COVISIBLE_REL_TOLERANCE: f32 = 0.04;
+
+/// Misaligns an aligned simulated frame by `p` the way a camera would see it: the RGB image
+/// and its ground-truth depth are rendered again from the RGB camera of calibration `p`
+/// ([`render_rgb_view`]), so the view has no holes; ToF amplitude and depth stay. A pixel is
+/// valid (mask, flow) where both cameras see the same point: its ToF pixel `q + W(q)` lies
+/// inside the image and the ToF view's ground truth there agrees with this view's depth.
+pub fn apply_rendered(
+    sample: &Sample,
+    scene: &Scene,
+    sim: &SimConfig,
+    seed: u64,
+    p: Calibration,
+) -> Result<Sample> {
+    let frame = &sample.frame;
+    let tof_gt = sample
+        .truth
+        .depth
+        .as_ref()
+        .context("frame has no ground-truth depth")?;
+    let (h, w) = frame.dim();
+    ensure!(
+        (scene.camera.height, scene.camera.width) == (h, w),
+        "the scene's camera is {}×{} but the frame is {w}×{h}",
+        scene.camera.width,
+        scene.camera.height
+    );
+    let (rgb, depth) = render_rgb_view(scene, sim, seed, frame.index, &p);
+    let mut flow = Flow::zeros(h, w);
+    let mut valid = Array2::from_elem((h, w), false);
+    for ((y, x), &z) in depth.indexed_iter() {
+        let Some((fu, fv)) = p.flow_at(z) else {
+            continue;
+        };
+        flow.u[(y, x)] = fu;
+        flow.v[(y, x)] = fv;
+        let (qx, qy) = ((x as f32 + fu).round(), (y as f32 + fv).round());
+        if qx < 0.0 || qy < 0.0 || qx > (w - 1) as f32 || qy > (h - 1) as f32 {
+            continue;
+        }
+        let zt = tof_gt[(qy as usize, qx as usize)];
+        valid[(y, x)] =
+            dear_capture::is_valid_depth(zt) && (zt - z).abs() <= COVISIBLE_REL_TOLERANCE * z;
+    }
+    Ok(Sample {
+        frame: RgbdFrame::new(
+            frame.index,
+            frame.timestamp_ns,
+            rgb,
+            frame.amplitude.clone(),
+            frame.depth.clone(),
+        ),
+        truth: GroundTruth {
+            depth: Some(depth),
+            mask: Some(valid),
+            flow: Some(flow),
+            perturbation: Some(p),
+        },
+    })
+}
+
+/// How `perturb_dir` makes the RGB view of a misaligned frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ViewSource {
+    /// Render it again from the scene (captures written by `dear-synth generate` / `family`,
+    /// whose `capture.json` holds what drew each scene): what a camera sees, no holes.
+    Render,
+    /// Splat the aligned RGB with its ground-truth depth ([`synthesize_view`]): for any
+    /// capture with ground truth; disocclusions and borders stay black.
+    Splat,
+}
+
+/// The parameters that drew an aligned capture's scenes, when `dear-synth` wrote it.
+fn generate_params(manifest: &dear_capture::CaptureManifest) -> Option<GenerateParams> {
+    let details = manifest.source.get("details")?;
+    if details.get("kind")?.as_str()? != "aligned" {
+        return None;
+    }
+    serde_json::from_value(details.get("params")?.clone()).ok()
+}
+
 /// Reads the aligned capture `input` and writes its misaligned version to `output`.
 pub fn perturb_dir(
     input: &Path,
     output: &Path,
     mode: &PerturbMode,
     seed: u64,
+    view: ViewSource,
     mut progress: impl FnMut(usize, usize),
 ) -> Result<()> {
     let dir = CaptureDir::open(input).with_context(|| format!("opening {}", input.display()))?;
     let src = dir.manifest().clone();
+    let scenes = match view {
+        ViewSource::Splat => None,
+        ViewSource::Render => Some(generate_params(&src).with_context(|| {
+            format!(
+                "{}: capture.json has no dear-synth scene parameters (source.details.params of \
+                 kind \"aligned\"), so its views cannot be rendered again; use --view splat",
+                input.display()
+            )
+        })?),
+    };
     ensure!(
         src.frames
             .iter()
@@ -169,6 +273,10 @@ pub fn perturb_dir(
         "from": input.display().to_string(),
         "perturbation": mode,
         "perturbation_seed": seed,
+        "view": match view {
+            ViewSource::Render => "rendered from the RGB camera of each frame's calibration",
+            ViewSource::Splat => "splatted from the aligned RGB with the ground-truth depth",
+        },
         "sigma_definition": "c_x, c_y ~ N(0, σ) px; t_x, t_y = median valid GT depth · N(0, σ) px·m (each axis independent)",
         "aligned_source": src.source,
     });
@@ -196,7 +304,14 @@ pub fn perturb_dir(
             src.intrinsics.fx as f64,
             median,
         );
-        let perturbed = apply(&sample, p)?;
+        let perturbed = match &scenes {
+            None => apply(&sample, p)?,
+            Some(params) => {
+                let scene = Scene::random(params.camera(), &params.scene, params.seed, frame.index);
+                apply_rendered(&sample, &scene, &params.sim, params.seed, p)
+                    .with_context(|| format!("frame {pos}"))?
+            }
+        };
         writer.write_sample(&perturbed.frame, &perturbed.truth)?;
         progress(pos + 1, n);
     }

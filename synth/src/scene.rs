@@ -6,6 +6,7 @@
 //! away, at least one of them concave (open box, V-shaped plates or an L) so that multi-path
 //! interference appears away from the room corners too.
 
+use dear_capture::Calibration;
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 
@@ -70,6 +71,22 @@ impl Camera {
     #[inline]
     pub fn z_of(&self, p: Vec3) -> f64 {
         self.pose.to_local(p).z
+    }
+
+    /// The RGB camera of a module whose RGB–ToF calibration is `p` when this camera is its ToF
+    /// sensor: RGB pixel `q` then sees what ToF pixel `q + (t/z + c)` sees, at the same z.
+    /// A point at camera-frame `(X, Y, Z)` projects to `f·X/Z + c₀` here and to
+    /// `f·(X − d)/Z + c₀ − c` from a centre moved by `d` with the principal point moved by
+    /// `−c`; their difference is `f·d/Z + c`, so `d = (t_x/f_x, t_y/f_y, 0)` (no rotation, no
+    /// z offset: the flow model has neither).
+    pub fn rgb_camera_of(&self, p: &Calibration) -> Camera {
+        let d = Vec3::new(p.tx as f64 / self.fx, p.ty as f64 / self.fy, 0.0);
+        Camera {
+            cx: self.cx - p.cx as f64,
+            cy: self.cy - p.cy as f64,
+            pose: Pose::new(self.pose.rot, self.pose.to_world(d)),
+            ..*self
+        }
     }
 }
 

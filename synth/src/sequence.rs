@@ -5,8 +5,8 @@
 //! spins (≤ 40°/s); the camera sways on low-frequency sinusoids (a few cm, ≤ 2°), as a hand-held
 //! module does. The room stays put.
 //!
-//! Calibration drift (the true `perturbation` of each frame, applied with
-//! `synthesize_view`): per axis, `c(t) = Σ₂ Aᵢ sin(2π t / Tᵢ + φᵢ) + w(t)`, two sinusoids
+//! Calibration drift (the true `perturbation` of each frame; each frame's RGB view is rendered
+//! from the RGB camera of that calibration, `perturb::apply_rendered`): per axis, `c(t) = Σ₂ Aᵢ sin(2π t / Tᵢ + φᵢ) + w(t)`, two sinusoids
 //! (periods 1.5–6 s, amplitudes so the sum peaks at `c_amplitude_px`) plus a smoothed random
 //! walk `w` (OIS wander), and `t(t) = t₀ + ṫ·t`, a slow linear drift from a random factory
 //! baseline term `t₀`. `capture.json`'s `initial_calibration` is the perturbation of frame 0 —
@@ -25,7 +25,7 @@ use serde_json::json;
 use crate::dataset::manifest;
 use crate::geometry::Pose;
 use crate::math::{Mat3, Vec3};
-use crate::perturb::apply;
+use crate::perturb::apply_rendered;
 use crate::rng::{keyed_rng, Stream};
 use crate::scene::{Camera, Scene, SceneConfig};
 use crate::simulate::{simulate, SimConfig};
@@ -251,6 +251,7 @@ pub fn generate_sequence(
             "kind": "sequence",
             "params": params,
             "drift_model": "c(t) = two sinusoids (periods 1.5–6 s) + smoothed random walk; t(t) = t0 + rate·t; initial_calibration = frame 0",
+            "view": "rendered from the RGB camera of each frame's calibration",
         }),
     );
     m.initial_calibration = drift.at(0);
@@ -261,7 +262,7 @@ pub fn generate_sequence(
         let scene = motion.at(i as f64 / params.fps);
         let sample = simulate(&scene, &params.sim, params.seed, i as u64);
         let aligned = sample.into_capture_sample(i as u64, i as u64 * interval_ns);
-        let mut drifted = apply(&aligned, drift.at(i))?;
+        let mut drifted = apply_rendered(&aligned, &scene, &params.sim, params.seed, drift.at(i))?;
         if !params.write_flow {
             drifted.truth.flow = None;
         }

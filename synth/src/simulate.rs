@@ -81,6 +81,33 @@ pub fn simulate(scene: &Scene, cfg: &SimConfig, seed: u64, frame: u64) -> Sample
     }
 }
 
+/// What the RGB camera of a module with calibration `p` sees of `scene` (whose camera is the
+/// ToF sensor): the tone-mapped RGB image and the ground-truth z-depth of that view, rendered
+/// from the scene itself, so disocclusions and the borders show what is there instead of
+/// holes. Only the RGB shading is computed (no ToF light transport).
+pub fn render_rgb_view(
+    scene: &Scene,
+    cfg: &SimConfig,
+    seed: u64,
+    frame: u64,
+    p: &Calibration,
+) -> (Array3<u8>, Array2<f32>) {
+    let mut moved = scene.clone();
+    moved.camera = scene.camera.rgb_camera_of(p);
+    let opts = RenderOptions {
+        rgb: true,
+        indirect_spp: 0,
+        max_bounces: 1,
+        indirect_filter_radius: 0,
+        ..cfg.render.clone()
+    };
+    let signal = render(&moved, &opts, seed, frame);
+    let depth = Array2::from_shape_fn((signal.height, signal.width), |(y, x)| {
+        signal.pixels[y * signal.width + x].gt_z as f32
+    });
+    (rgb_image(&signal, cfg.rgb_exposure), depth)
+}
+
 impl Sample {
     /// The sample as a frame of the capture format with its ground truth. It is aligned by
     /// construction, so its perturbation is recorded as exactly zero (training treats a frame

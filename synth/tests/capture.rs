@@ -1,10 +1,12 @@
 //! The simulator's outputs through the capture format: generate → read back → perturb →
 //! sequence, checking contents, not only that files appear.
 
+use std::path::Path;
+
 use dear_capture::Calibration;
 use dear_capture::CaptureDir;
 use dear_synth::dataset::{generate, GenerateParams};
-use dear_synth::perturb::{perturb_dir, PerturbMode};
+use dear_synth::perturb::{perturb_dir, PerturbMode, ViewSource};
 use dear_synth::scene::SceneConfig;
 use dear_synth::sequence::{generate_sequence, DriftParams, SequenceParams};
 use dear_synth::simulate::SimConfig;
@@ -18,19 +20,24 @@ fn small_sim() -> SimConfig {
     sim
 }
 
+/// `count` random scenes of `width`×`height` at 70° with [`small_sim`].
+fn small_params(width: usize, height: usize, count: usize) -> GenerateParams {
+    GenerateParams {
+        width,
+        height,
+        hfov_deg: 70.0,
+        count,
+        seed: 5,
+        sim: small_sim(),
+        scene: SceneConfig::default(),
+    }
+}
+
 #[test]
 fn generate_then_perturb_round_trips_with_exact_flow() {
     let tmp = tempfile::tempdir().unwrap();
     let aligned = tmp.path().join("aligned");
-    let params = GenerateParams {
-        width: 64,
-        height: 48,
-        hfov_deg: 70.0,
-        count: 3,
-        seed: 5,
-        sim: small_sim(),
-        scene: SceneConfig::default(),
-    };
+    let params = small_params(64, 48, 3);
     let mut calls = 0;
     generate(&aligned, &params, |_| calls += 1).unwrap();
     assert_eq!(calls, 3);
@@ -65,16 +72,29 @@ fn generate_then_perturb_round_trips_with_exact_flow() {
         assert!(truth.perturbation == Some(Calibration::default()) && truth.flow.is_none());
     }
 
-    let misaligned = tmp.path().join("sigma2");
+    for view in [ViewSource::Render, ViewSource::Splat] {
+        check_misaligned(&dir, &aligned, &tmp.path().join(format!("{view:?}")), view);
+    }
+}
+
+/// `perturb_dir`'s output of an aligned 64×48 capture: ToF images kept, RGB moved, the flow
+/// that of the recorded perturbation at the ground-truth depth on every valid pixel.
+fn check_misaligned(dir: &CaptureDir, aligned: &Path, misaligned: &Path, view: ViewSource) {
     perturb_dir(
-        &aligned,
-        &misaligned,
+        aligned,
+        misaligned,
         &PerturbMode::Gaussian { sigma_px: 2.0 },
         9,
+        view,
         |_, _| {},
     )
     .unwrap();
-    let mdir = CaptureDir::open(&misaligned).unwrap();
+    let mdir = CaptureDir::open(misaligned).unwrap();
+    let rendered = mdir.manifest().source["view"]
+        .as_str()
+        .unwrap()
+        .starts_with("rendered");
+    assert_eq!(rendered, view == ViewSource::Render);
     for i in 0..3 {
         let a = dir.read_frame(i).unwrap();
         let dear_capture::Sample { frame: m, truth } = mdir.read_sample(i).unwrap();
@@ -101,9 +121,36 @@ fn generate_then_perturb_round_trips_with_exact_flow() {
         // σ in px is meant for full-size images: on 64×48 a near object moves far.
         assert!(
             n > 64 * 48 * 2 / 5,
-            "frame {i}: {n} valid pixels under {p:?}"
+            "{view:?} frame {i}: {n} valid pixels under {p:?}"
         );
+        if view == ViewSource::Render {
+            // A camera sees the room everywhere: ground truth at every pixel of the view.
+            assert!(gt.iter().all(|&z| z > 0.0), "frame {i}: holes in the view");
+        }
     }
+}
+
+/// A capture the simulator did not write (no scene parameters) cannot be rendered again: the
+/// error names the capture and the way out.
+#[test]
+fn rendering_a_capture_without_scene_parameters_is_refused_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let aligned = tmp.path().join("aligned");
+    generate(&aligned, &small_params(32, 24, 1), |_| {}).unwrap();
+    let manifest = aligned.join("capture.json");
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&manifest).unwrap()).unwrap();
+    json["source"] = serde_json::json!({ "generator": "a camera" });
+    std::fs::write(&manifest, json.to_string()).unwrap();
+    let mode = PerturbMode::Gaussian { sigma_px: 2.0 };
+    let out = tmp.path().join("out");
+    let err = perturb_dir(&aligned, &out, &mode, 1, ViewSource::Render, |_, _| {}).unwrap_err();
+    let text = format!("{err:#}");
+    assert!(
+        text.contains(&aligned.display().to_string()) && text.contains("--view splat"),
+        "{text}"
+    );
+    perturb_dir(&aligned, &out, &mode, 1, ViewSource::Splat, |_, _| {}).unwrap();
 }
 
 #[test]
