@@ -795,8 +795,11 @@ def main() -> None:
             "`scripts/results.py`). Test sets: "
             f"{frames} frames at 320×240 rendered with seed 9001, and misaligned copies at "
             "the paper's σ = 2, 4, 6 px (pixels of a 640×480 image; rendered as σ = 1, 2, 3 px "
-            "at 320×240, seed 4). Every method runs through `dear-pipeline`, the code the "
-            "daemon runs; times are medians on the 2-core development machine, tract on one "
+            "at 320×240, seed 4) whose RGB views are rendered from the RGB camera of each "
+            "frame's calibration, as a camera sees them (no black disocclusions; "
+            'synth/README.md, "Misalignment"). Every method runs through `dear-pipeline`, '
+            "the code the daemon runs; times are medians on the 2-core development machine, "
+            "tract on one "
             "thread."
         ),
         "",
