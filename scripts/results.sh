@@ -33,7 +33,8 @@ fi
 # misalignment is half as many pixels, so set "sigmaN" is rendered with σ = N/2.
 # σ = 8 and 12 px: misalignments beyond the paper's (issue 32).
 # Misaligned sets (and sequences) are made again when their RGB views were splatted (black
-# disocclusions: sets from before `dear-synth perturb` rendered them).
+# disocclusions: sets from before `dear-synth perturb` rendered them); a rendered set's
+# capture.json says so (dear_synth::perturb::RENDERED_VIEW).
 rendered() { grep -q 'rendered from the RGB camera' "$1/capture.json" 2> /dev/null; }
 for sigma in 2 4 6 8 12; do
     if ! rendered "$data/sigma$sigma"; then

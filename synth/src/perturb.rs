@@ -25,13 +25,12 @@ use std::path::Path;
 
 use anyhow::{ensure, Context, Result};
 use dear_capture::{Calibration, CaptureDir, CaptureWriter, Flow, GroundTruth, RgbdFrame, Sample};
-use dear_pipeline::geometry::synthesize_view;
+use dear_pipeline::geometry::{synthesize_view, SynthesizedView};
+use ndarray::Array2;
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
-
-use ndarray::Array2;
 
 use crate::dataset::GenerateParams;
 use crate::rng::{keyed_rng, Stream};
@@ -137,7 +136,13 @@ pub fn apply(sample: &Sample, p: Calibration) -> Result<Sample> {
         .as_ref()
         .context("frame has no ground-truth depth to splat")?;
     let view = synthesize_view(frame.rgb.view(), gt.view(), &p);
-    Ok(Sample {
+    Ok(seen_through(frame, view, p))
+}
+
+/// `frame` misaligned by `p`: the RGB image, ground truth and mask of the RGB camera's `view`,
+/// the ToF amplitude and depth of `frame`.
+fn seen_through(frame: &RgbdFrame, view: SynthesizedView, p: Calibration) -> Sample {
+    Sample {
         frame: RgbdFrame::new(
             frame.index,
             frame.timestamp_ns,
@@ -151,7 +156,7 @@ pub fn apply(sample: &Sample, p: Calibration) -> Result<Sample> {
             flow: Some(view.flow),
             perturbation: Some(p),
         },
-    })
+    }
 }
 
 /// How far (relative) the ToF view's ground truth at `q + W(q)` may lie from the RGB view's at
@@ -202,22 +207,18 @@ pub fn apply_rendered(
         valid[(y, x)] =
             dear_capture::is_valid_depth(zt) && (zt - z).abs() <= COVISIBLE_REL_TOLERANCE * z;
     }
-    Ok(Sample {
-        frame: RgbdFrame::new(
-            frame.index,
-            frame.timestamp_ns,
-            rgb,
-            frame.amplitude.clone(),
-            frame.depth.clone(),
-        ),
-        truth: GroundTruth {
-            depth: Some(depth),
-            mask: Some(valid),
-            flow: Some(flow),
-            perturbation: Some(p),
-        },
-    })
+    let view = SynthesizedView {
+        rgb,
+        depth,
+        flow,
+        valid,
+    };
+    Ok(seen_through(frame, view, p))
 }
+
+/// `capture.json`'s `source.view` (or `source.details.view` of a sequence) for views made by
+/// [`apply_rendered`]; `scripts/results.sh` looks for it to tell such sets from splatted ones.
+pub const RENDERED_VIEW: &str = "rendered from the RGB camera of each frame's calibration";
 
 /// How `perturb_dir` makes the RGB view of a misaligned frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -274,7 +275,7 @@ pub fn perturb_dir(
         "perturbation": mode,
         "perturbation_seed": seed,
         "view": match view {
-            ViewSource::Render => "rendered from the RGB camera of each frame's calibration",
+            ViewSource::Render => RENDERED_VIEW,
             ViewSource::Splat => "splatted from the aligned RGB with the ground-truth depth",
         },
         "sigma_definition": "c_x, c_y ~ N(0, σ) px; t_x, t_y = median valid GT depth · N(0, σ) px·m (each axis independent)",

@@ -6,7 +6,8 @@
 //! module does. The room stays put.
 //!
 //! Calibration drift (the true `perturbation` of each frame; each frame's RGB view is rendered
-//! from the RGB camera of that calibration, `perturb::apply_rendered`): per axis, `c(t) = Σ₂ Aᵢ sin(2π t / Tᵢ + φᵢ) + w(t)`, two sinusoids
+//! from the RGB camera of that calibration, `perturb::apply_rendered`): per axis,
+//! `c(t) = Σ₂ Aᵢ sin(2π t / Tᵢ + φᵢ) + w(t)`, two sinusoids
 //! (periods 1.5–6 s, amplitudes so the sum peaks at `c_amplitude_px`) plus a smoothed random
 //! walk `w` (OIS wander), and `t(t) = t₀ + ṫ·t`, a slow linear drift from a random factory
 //! baseline term `t₀`. `capture.json`'s `initial_calibration` is the perturbation of frame 0 —
@@ -25,7 +26,7 @@ use serde_json::json;
 use crate::dataset::manifest;
 use crate::geometry::Pose;
 use crate::math::{Mat3, Vec3};
-use crate::perturb::apply_rendered;
+use crate::perturb::{apply_rendered, RENDERED_VIEW};
 use crate::rng::{keyed_rng, Stream};
 use crate::scene::{Camera, Scene, SceneConfig};
 use crate::simulate::{simulate, SimConfig};
@@ -251,7 +252,7 @@ pub fn generate_sequence(
             "kind": "sequence",
             "params": params,
             "drift_model": "c(t) = two sinusoids (periods 1.5–6 s) + smoothed random walk; t(t) = t0 + rate·t; initial_calibration = frame 0",
-            "view": "rendered from the RGB camera of each frame's calibration",
+            "view": RENDERED_VIEW,
         }),
     );
     m.initial_calibration = drift.at(0);

@@ -69,9 +69,7 @@ pub fn simulate(scene: &Scene, cfg: &SimConfig, seed: u64, frame: u64) -> Sample
         seed,
         frame,
     );
-    let gt_depth = Array2::from_shape_fn((signal.height, signal.width), |(y, x)| {
-        signal.pixels[y * signal.width + x].gt_z as f32
-    });
+    let gt_depth = gt_depth(&signal);
     let mask = Array2::from_shape_fn(gt_depth.dim(), |p| gt_depth[p] > 0.0 && tof.depth[p] > 0.0);
     Sample {
         rgb: rgb_image(&signal, cfg.rgb_exposure),
@@ -102,10 +100,14 @@ pub fn render_rgb_view(
         ..cfg.render.clone()
     };
     let signal = render(&moved, &opts, seed, frame);
-    let depth = Array2::from_shape_fn((signal.height, signal.width), |(y, x)| {
+    (rgb_image(&signal, cfg.rgb_exposure), gt_depth(&signal))
+}
+
+/// The ground-truth z-depth through each pixel centre, metres (0 where nothing was hit).
+fn gt_depth(signal: &SignalImage) -> Array2<f32> {
+    Array2::from_shape_fn((signal.height, signal.width), |(y, x)| {
         signal.pixels[y * signal.width + x].gt_z as f32
-    });
-    (rgb_image(&signal, cfg.rgb_exposure), depth)
+    })
 }
 
 impl Sample {

@@ -6,7 +6,7 @@ use std::path::Path;
 use dear_capture::Calibration;
 use dear_capture::CaptureDir;
 use dear_synth::dataset::{generate, GenerateParams};
-use dear_synth::perturb::{perturb_dir, PerturbMode, ViewSource};
+use dear_synth::perturb::{perturb_dir, PerturbMode, ViewSource, RENDERED_VIEW};
 use dear_synth::scene::SceneConfig;
 use dear_synth::sequence::{generate_sequence, DriftParams, SequenceParams};
 use dear_synth::simulate::SimConfig;
@@ -90,10 +90,7 @@ fn check_misaligned(dir: &CaptureDir, aligned: &Path, misaligned: &Path, view: V
     )
     .unwrap();
     let mdir = CaptureDir::open(misaligned).unwrap();
-    let rendered = mdir.manifest().source["view"]
-        .as_str()
-        .unwrap()
-        .starts_with("rendered");
+    let rendered = mdir.manifest().source["view"].as_str() == Some(RENDERED_VIEW);
     assert_eq!(rendered, view == ViewSource::Render);
     for i in 0..3 {
         let a = dir.read_frame(i).unwrap();
