@@ -67,3 +67,32 @@ def test_resume_continues_where_it_stopped(capture_dir: Path, tmp_path: Path) ->
         assert "different profile" in str(e)
     else:
         raise AssertionError("resume with another profile must fail")
+
+
+def test_a_stage_ends_when_its_time_budget_is_spent(capture_dir: Path, tmp_path: Path) -> None:
+    """A spent budget ends the stage after the epoch in progress (one step here, where five
+    epochs of two were asked for), which is validated and saved; the next stage runs as usual."""
+    import torch
+
+    from dear_train.training.config import Stage, get_profile
+    from dear_train.training.trainer import Trainer
+
+    profile = get_profile("smoke")
+    budgeted = type(profile)(
+        **{
+            **profile.__dict__,
+            "stages": (Stage("flow", 5, 1e-3, max_seconds=1e-6), Stage("fusion", 1, 1e-3)),
+        }
+    )
+    run = tmp_path / "run"
+    Trainer(budgeted, [capture_dir], run).run()
+    history = json.loads((run / "history.json").read_text())
+    assert [(h["stage"], h["steps"], h.get("stopped")) for h in history] == [
+        ("flow", 1, "time budget"),
+        ("fusion", 2, None),
+    ]
+    assert history[0]["val"], "the cut epoch is validated"
+    last = torch.load(run / "checkpoints" / "last.pt", weights_only=False)
+    assert (last["stage_index"], last["next_epoch"]) == (2, 0)
+    with pytest.raises(ValueError, match="max_seconds must be positive"):
+        Stage("flow", 1, 1e-3, max_seconds=0)

@@ -35,7 +35,7 @@ from dear_train.training.checkpoint import (
     training_state,
     warm_start_refine,
 )
-from dear_train.training.config import Profile
+from dear_train.training.config import Profile, Stage
 from dear_train.training.curves import plot_history
 
 
@@ -233,6 +233,16 @@ class Trainer:
             path,
         )
 
+    def _budget_spent(self, stage: Stage, stage_start: float) -> bool:
+        """Whether the stage's wall-time budget is spent; every rank takes rank 0's answer, so
+        that all of them leave the epoch at the same step."""
+        if stage.max_seconds is None:
+            return False
+        spent = time.time() - stage_start >= stage.max_seconds
+        if self.dist.enabled:
+            spent = distributed.broadcast_flag(spent, self.dist, self.device)
+        return spent
+
     def run(self) -> dict[str, float]:
         """Run (or resume) the schedule; returns the final validation metrics."""
         p = self.profile
@@ -255,6 +265,8 @@ class Trainer:
             if self.dist.enabled:
                 loss_mod = DistributedDataParallel(loss_mod, find_unused_parameters=True)
             loader = self._loader(self.train_set, shuffle=True)
+            stage_start = time.time()
+            out_of_time = False
             for epoch in range(first_epoch, stage.epochs):
                 self.train_set.set_epoch(epoch + 1000 * si)
                 if isinstance(loader.sampler, DistributedSampler):
@@ -271,6 +283,9 @@ class Trainer:
                 )
                 for batch in bar:
                     if steps >= limit:
+                        break
+                    out_of_time = self._budget_spent(stage, stage_start)
+                    if out_of_time and steps > 0:
                         break
                     b = {k: v.to(self.device, non_blocking=True) for k, v in batch.items()}
                     loss, parts = loss_mod(b)
@@ -305,18 +320,23 @@ class Trainer:
                     "train_loss": train_loss,
                     "val": val,
                 }
+                if out_of_time:
+                    entry["stopped"] = "time budget"
                 self.history.append(entry)
+                stage_done = out_of_time or epoch + 1 == stage.epochs
                 if main:
                     tqdm.write(json.dumps(entry))
                     self._save(
                         self.out / "checkpoints" / "last.pt",
-                        si if epoch + 1 < stage.epochs else si + 1,
-                        epoch + 1 if epoch + 1 < stage.epochs else 0,
+                        si + 1 if stage_done else si,
+                        0 if stage_done else epoch + 1,
                         opt.state_dict(),
                         sched.state_dict(),
                     )
                     plot_history(self.history, self.out / "curves.png")
                     (self.out / "history.json").write_text(json.dumps(self.history, indent=1))
+                if out_of_time:
+                    break
             if main:
                 self._save(self.out / "checkpoints" / f"stage-{stage.name}.pt", si + 1, 0, {}, {})
             distributed.barrier(self.dist)
