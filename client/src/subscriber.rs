@@ -104,6 +104,17 @@ pub enum ReceiveError {
         owner: u32,
         root: std::path::PathBuf,
     },
+    /// Issue 34: the shared records of this client's channel from the daemon were found
+    /// overwritten (by another process of the service's group, or a buggy one): the queue
+    /// named a sample outside the daemon's frames, or the record's layout changed. Nothing
+    /// more arrives through this [`Client`]: connect again ([`Client::connect`]; the daemon
+    /// makes a damaged service again within about two seconds).
+    #[error("the channel from {service:?} to this client was corrupted: another process wrote into its shared records (the transport's *.connection / *.dynamic files); nothing more can be received through it: connect again")]
+    Corrupted {
+        service: String,
+        #[source]
+        source: iceoryx2::port::ReceiveError,
+    },
     /// A sample arrived but is not a valid frame; it was dropped. Not fatal: the next one may
     /// be fine (`dear watch` counts these).
     #[error("frame from {service:?} rejected")]
@@ -153,6 +164,12 @@ impl Client {
             source,
         })?;
         let root_owner = std::fs::metadata(&root).map(|m| m.uid()).unwrap_or(0);
+        // Issue 34: another process of the service's group can truncate this client's shared
+        // records while they are mapped; an access to the lost pages then reads zeros (the
+        // record is refused as corrupted, `ReceiveError::Corrupted`) instead of killing this
+        // process with SIGBUS. Faults anywhere else keep the application's disposition. Not
+        // fatal when it cannot be installed: only that attack is not survived.
+        let _ = dear_proto::transport::survive_truncated_records();
         let node = NodeBuilder::new()
             .config(&config)
             // The application owns its signals; iceoryx2 must not install handlers of its own.
@@ -218,13 +235,16 @@ impl Client {
     /// The next queued frame, if any, without waiting. A frame from a publisher of another user
     /// than the root's owner (or root) is refused ([`ReceiveError::UntrustedPublisher`]).
     pub fn try_receive(&self) -> Result<Option<Frame>, ReceiveError> {
-        let sample = self
-            .subscriber
-            .receive()
-            .map_err(|source| ReceiveError::Receive {
+        let sample = self.subscriber.receive().map_err(|source| match source {
+            iceoryx2::port::ReceiveError::ConnectionCorrupted => ReceiveError::Corrupted {
                 service: self.service.clone(),
                 source,
-            })?;
+            },
+            source => ReceiveError::Receive {
+                service: self.service.clone(),
+                source,
+            },
+        })?;
         let Some(sample) = sample else {
             return Ok(None);
         };

@@ -198,65 +198,22 @@ pub fn repair_global_mgmt(root: &Path) -> Vec<PathBuf> {
     repaired
 }
 
-static TRUNCATED: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-
 /// Issue 34: a member of the service's group can truncate a shared record the daemon has
-/// mapped (`truncate -s0 *.connection`; clients must be able to write those files, and
-/// write permission is what `ftruncate` needs); the daemon's next access to the lost pages
-/// raised SIGBUS and killed it. This installs a SIGBUS handler that, when the faulting
-/// address lies in a mapping of such a record (the patched iceoryx2 registers them:
-/// `iceoryx2_bb_lock_free::dear_shared`), maps private zero pages over that whole mapping and
-/// returns: the access is retried and reads zeros, which the patched iceoryx2 refuses as a
-/// corrupted record, and the daemon makes the service again ([`truncated_records`] counts
-/// the repairs). A fault anywhere else gets the default action (the process dies, as
-/// before). The same technique Wayland compositors use against clients that shrink a shared
-/// memory pool.
+/// mapped (`truncate -s0 *.connection`); the daemon's next access to the lost pages raised
+/// SIGBUS and killed it. Installs [`dear_proto::transport::survive_truncated_records`]'s
+/// SIGBUS handler (the client SDK installs the same one): a fault in such a record is answered
+/// with private zero pages, which the patched iceoryx2 refuses as a corrupted record, and the
+/// daemon makes the service again ([`truncated_records`] counts the repairs). A fault
+/// anywhere else gets the default action (the process dies, as before).
 pub fn survive_truncated_records() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        // SAFETY: a zeroed sigaction with a SA_SIGINFO handler and an empty mask is valid;
-        // the handler only calls async-signal-safe functions (atomics, mmap, signal).
-        unsafe {
-            let mut action: libc::sigaction = std::mem::zeroed();
-            action.sa_sigaction = on_sigbus as *const () as usize;
-            action.sa_flags = libc::SA_SIGINFO;
-            libc::sigemptyset(&mut action.sa_mask);
-            if libc::sigaction(libc::SIGBUS, &action, std::ptr::null_mut()) != 0 {
-                tracing::warn!(error = %io::Error::last_os_error(), "cannot install the SIGBUS handler: a client that truncates a shared record crashes the daemon");
-            }
-        }
-    });
+    if let Err(error) = dear_proto::transport::survive_truncated_records() {
+        tracing::warn!(%error, "cannot install the SIGBUS handler: a client that truncates a shared record crashes the daemon");
+    }
 }
 
 /// How many truncated shared records [`survive_truncated_records`] replaced by zeros.
 pub fn truncated_records() -> u64 {
-    TRUNCATED.load(std::sync::atomic::Ordering::Relaxed)
-}
-
-extern "C" fn on_sigbus(_: libc::c_int, info: *mut libc::siginfo_t, _: *mut libc::c_void) {
-    // SAFETY: the kernel passes a valid siginfo for a SA_SIGINFO handler.
-    let address = unsafe { (*info).si_addr() } as usize;
-    if let Some((start, end)) = iceoryx2_bb_lock_free::dear_shared::mapping_of(address) {
-        // SAFETY: replaces pages of a mapping this process made (registered by iceoryx2)
-        // with private zero pages of the same extent; nothing else lives there.
-        let mapped = unsafe {
-            libc::mmap(
-                start as *mut libc::c_void,
-                end - start,
-                libc::PROT_READ | libc::PROT_WRITE,
-                libc::MAP_PRIVATE | libc::MAP_ANONYMOUS | libc::MAP_FIXED,
-                -1,
-                0,
-            )
-        };
-        if mapped != libc::MAP_FAILED {
-            TRUNCATED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            return;
-        }
-    }
-    // Not a shared record: the default action when the access is retried.
-    // SAFETY: signal is async-signal-safe.
-    unsafe { libc::signal(libc::SIGBUS, libc::SIG_DFL) };
+    dear_proto::transport::truncated_records()
 }
 
 /// How iceoryx2 names a service's records: `services/iox2_<hash>.service` (its static

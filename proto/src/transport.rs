@@ -354,6 +354,87 @@ fn check_ancestors(path: &std::path::Path, me: u32) -> Result<(), RootError> {
     Ok(())
 }
 
+static TRUNCATED: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// The SIGBUS disposition before [`survive_truncated_records`] installed its handler: a fault
+/// outside the shared records goes back to it. Written once, before the handler is installed,
+/// and only read afterwards (from the handler).
+static mut PREVIOUS_SIGBUS: std::mem::MaybeUninit<libc::sigaction> =
+    std::mem::MaybeUninit::uninit();
+
+/// Issue 34: a member of the service's group can truncate a shared record that another
+/// process has mapped (`truncate -s0 *.connection`: clients must be able to write those files,
+/// and write permission is what `ftruncate` needs); that process's next access to the lost
+/// pages raised SIGBUS and killed it, the daemon or a client. This installs (once per process)
+/// a SIGBUS handler that, when the faulting address lies in a mapping of such a record (the
+/// patched iceoryx2 registers them: `iceoryx2_bb_lock_free::dear_shared`), maps private zero
+/// pages over that whole mapping and returns: the access is retried and reads zeros, which the
+/// patched iceoryx2 refuses as a corrupted record ([`truncated_records`] counts the repairs).
+/// A fault anywhere else goes to the disposition SIGBUS had before (by default the process
+/// dies, as before). The same technique Wayland compositors use against clients that shrink a
+/// shared memory pool. `deard` calls it before it serves, the client SDK when it connects; an
+/// application that installs a SIGBUS handler of its own after connecting replaces it.
+pub fn survive_truncated_records() -> std::io::Result<()> {
+    static ONCE: std::sync::OnceLock<Result<(), std::io::ErrorKind>> = std::sync::OnceLock::new();
+    let installed = ONCE.get_or_init(|| {
+        // SAFETY: a zeroed sigaction with a SA_SIGINFO handler and an empty mask is valid;
+        // the handler only calls async-signal-safe functions (atomics, mmap, sigaction).
+        // PREVIOUS_SIGBUS is written here once, before the handler can run.
+        unsafe {
+            let mut action: libc::sigaction = std::mem::zeroed();
+            action.sa_sigaction = on_sigbus as *const () as usize;
+            action.sa_flags = libc::SA_SIGINFO;
+            libc::sigemptyset(&mut action.sa_mask);
+            let previous = (&raw mut PREVIOUS_SIGBUS).cast::<libc::sigaction>();
+            std::ptr::write_bytes(previous, 0, 1);
+            if libc::sigaction(libc::SIGBUS, &action, previous) != 0 {
+                return Err(std::io::Error::last_os_error().kind());
+            }
+        }
+        Ok(())
+    });
+    installed.map_err(std::io::Error::from)
+}
+
+/// How many truncated shared records [`survive_truncated_records`] replaced by zeros in this
+/// process.
+pub fn truncated_records() -> u64 {
+    TRUNCATED.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+extern "C" fn on_sigbus(_: libc::c_int, info: *mut libc::siginfo_t, _: *mut libc::c_void) {
+    // SAFETY: the kernel passes a valid siginfo for a SA_SIGINFO handler.
+    let address = unsafe { (*info).si_addr() } as usize;
+    if let Some((start, end)) = iceoryx2_bb_lock_free::dear_shared::mapping_of(address) {
+        // SAFETY: replaces pages of a mapping this process made (registered by iceoryx2)
+        // with private zero pages of the same extent; nothing else lives there.
+        let mapped = unsafe {
+            libc::mmap(
+                start as *mut libc::c_void,
+                end - start,
+                libc::PROT_READ | libc::PROT_WRITE,
+                libc::MAP_PRIVATE | libc::MAP_ANONYMOUS | libc::MAP_FIXED,
+                -1,
+                0,
+            )
+        };
+        if mapped != libc::MAP_FAILED {
+            TRUNCATED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            return;
+        }
+    }
+    // Not a shared record: the previous disposition handles the access when it is retried.
+    // SAFETY: sigaction is async-signal-safe; PREVIOUS_SIGBUS was written before this handler
+    // was installed and is not written again.
+    unsafe {
+        libc::sigaction(
+            libc::SIGBUS,
+            (&raw const PREVIOUS_SIGBUS).cast::<libc::sigaction>(),
+            std::ptr::null_mut(),
+        )
+    };
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

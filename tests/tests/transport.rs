@@ -478,23 +478,9 @@ impl Scribbler {
     }
 }
 
-/// Defect 1 (the shared records): a member of the service's group wrote 152 random bytes into a
-/// `*.connection` file (the daemon aborted in the publisher's returned-sample handling) or a
-/// `*.dynamic` file (it aborted, SIGSEGV in release). Clients must be able to write both, so
-/// the patched iceoryx2 (third_party/README.md) checks on the publisher's side every offset,
-/// size and index it reads from them, and the daemon makes the service again when a client
-/// damaged its records (a truncated one, which raised SIGBUS, is replaced by zero pages). Here,
-/// while a client (`nobody`, in the group) receives, 600 seeded writes (random bytes, bit
-/// flips, overwritten headers, truncations) go into every such file in turn; the
-/// daemon must stay up throughout, and a fresh client must receive frames afterwards. The
-/// client being scribbled on may die: it is the one whose memory was written.
-#[test]
-fn a_client_scribbling_on_the_shared_records_cannot_crash_the_daemon() {
-    if !is_root() {
-        eprintln!("not root: cannot run clients as another user; not checked");
-        return;
-    }
-    // Longer by hand: DEAR_SCRIBBLE_WRITES=20000 DEAR_SCRIBBLE_SEED=7 (docs/security.md).
+/// The number of writes and the seed of a scribbling test: `DEAR_SCRIBBLE_WRITES` (default
+/// `writes`) and `DEAR_SCRIBBLE_SEED` (default `seed`), for longer runs by hand.
+fn scribble_settings(writes: u64, seed: u64) -> (usize, u64) {
     let env = |name: &str, default: u64| {
         std::env::var(name)
             .ok()
@@ -504,8 +490,181 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_the_daemon() {
             })
             .unwrap_or(default)
     };
-    let writes = env("DEAR_SCRIBBLE_WRITES", 600) as usize;
-    let seed = env("DEAR_SCRIBBLE_SEED", 0x34);
+    (
+        env("DEAR_SCRIBBLE_WRITES", writes) as usize,
+        env("DEAR_SCRIBBLE_SEED", seed),
+    )
+}
+
+/// Receiving client processes (`dear-probe`, as `nobody`) started during a scribbling test, each
+/// with its output and standard error in files of the test's directory. Killed when dropped.
+struct Clients {
+    dir: PathBuf,
+    started: usize,
+    children: Vec<Client>,
+}
+
+struct Client {
+    child: std::process::Child,
+    out: PathBuf,
+    err: PathBuf,
+    /// The size of its output (a line per frame) when last looked at.
+    seen: u64,
+}
+
+impl Client {
+    /// The frames it received so far (its output's frame lines).
+    fn received(&self) -> usize {
+        count_frames(&self.out)
+    }
+}
+
+/// The frame lines in the output file `out` of a `dear-probe`.
+fn count_frames(out: &std::path::Path) -> usize {
+    std::fs::read_to_string(out)
+        .unwrap_or_default()
+        .lines()
+        .filter(|l| l.starts_with("frame "))
+        .count()
+}
+
+impl Clients {
+    fn new(dir: &std::path::Path) -> Self {
+        Clients {
+            dir: dir.to_path_buf(),
+            started: 0,
+            children: Vec::new(),
+        }
+    }
+
+    /// Starts one more client of `service` under `root`: it receives until killed.
+    fn start(&mut self, root: &std::path::Path, service: &str) {
+        let out = self.dir.join(format!("client-{}.out", self.started));
+        let err = self.dir.join(format!("client-{}.err", self.started));
+        self.started += 1;
+        let child = Command::new(dear_test_support::paths::binary("dear-probe"))
+            .args([
+                "--service",
+                service,
+                "--count",
+                "1000000",
+                "--timeout-s",
+                "300",
+            ])
+            .env(dear_proto::IOX2_ROOT_ENV, root)
+            .env("RUST_BACKTRACE", "1")
+            .uid(NOBODY)
+            .gid(NOBODY)
+            .stdout(std::fs::File::create(&out).unwrap())
+            .stderr(std::fs::File::create(&err).unwrap())
+            .spawn()
+            .unwrap();
+        self.children.push(Client {
+            child,
+            out,
+            err,
+            seen: 0,
+        });
+    }
+
+    /// Stops (SIGKILL, not reported by [`Clients::ended`]) the running clients that received
+    /// nothing since the last call: the service they joined was made again by the daemon, or
+    /// their records keep them from receiving. The test starts others, which receive.
+    fn retire_idle(&mut self) {
+        self.children.retain_mut(|c| {
+            let size = std::fs::metadata(&c.out).map(|m| m.len()).unwrap_or(0);
+            let idle = size == c.seen && matches!(c.child.try_wait(), Ok(None));
+            c.seen = size;
+            if idle {
+                let _ = c.child.kill();
+                let _ = c.child.wait();
+            }
+            !idle
+        });
+    }
+
+    /// The clients still running.
+    fn running(&mut self) -> usize {
+        let mut running = 0;
+        for c in &mut self.children {
+            running += usize::from(matches!(c.child.try_wait(), Ok(None)));
+        }
+        running
+    }
+
+    /// The clients that ended since the last call, each as its exit status and its standard
+    /// error (they are forgotten: the test starts others).
+    fn ended(&mut self) -> Vec<(std::process::ExitStatus, String)> {
+        let mut ended = Vec::new();
+        self.children.retain_mut(|c| match c.child.try_wait() {
+            Ok(Some(status)) => {
+                ended.push((status, std::fs::read_to_string(&c.err).unwrap_or_default()));
+                false
+            }
+            _ => true,
+        });
+        ended
+    }
+}
+
+impl Drop for Clients {
+    fn drop(&mut self) {
+        for c in &mut self.children {
+            let _ = c.child.kill();
+            let _ = c.child.wait();
+        }
+    }
+}
+
+/// After the scribbling stopped, a fresh client receives frames. The daemon notices damaged
+/// records within two checks (a second apart) and makes the service again; a client that came
+/// meanwhile is refused by the damaged records or gets no frames, and connects again, as after
+/// any restart of the service. Each try is a whole client run: 3 frames or a 5 s timeout, a
+/// second after the last; then a client receives 10 frames in a row.
+fn a_fresh_client_receives(s: &Setup, service: &str, daemon: &mut Daemon) {
+    let mut refused = Vec::new();
+    let served = (0..10).any(|_| {
+        // A client that connects again waits a little first (the daemon checks every second).
+        std::thread::sleep(Duration::from_secs(1));
+        let out = Command::new(dear_test_support::paths::binary("dear-probe"))
+            .args(["--service", service, "--count", "3", "--timeout-s", "5"])
+            .env(dear_proto::IOX2_ROOT_ENV, &s.root)
+            .uid(NOBODY)
+            .gid(NOBODY)
+            .output()
+            .unwrap();
+        refused.push(String::from_utf8_lossy(&out.stderr).into_owned());
+        out.status.success()
+    });
+    assert!(
+        served,
+        "no fresh client received 3 frames in 10 tries: {refused:#?}\n{}",
+        daemon.log_text()
+    );
+    assert!(daemon.is_running(), "{}", daemon.log_text());
+    let fresh = s.probe(service, NOBODY);
+    receives(&fresh, 10, daemon);
+    assert!(daemon.is_running(), "{}", daemon.log_text());
+}
+
+/// Defect 1 (the shared records): a member of the service's group wrote 152 random bytes into a
+/// `*.connection` file (the daemon aborted in the publisher's returned-sample handling) or a
+/// `*.dynamic` file (it aborted, SIGSEGV in release). Clients must be able to write both, so
+/// the patched iceoryx2 (third_party/README.md) checks on the publisher's side every offset,
+/// size and index it reads from them, and the daemon makes the service again when a client
+/// damaged its records (a truncated one, which raised SIGBUS, is replaced by zero pages). Here,
+/// while a client (`nobody`, in the group) receives, 600 seeded writes (random bytes, bit
+/// flips, overwritten headers, truncations) go into every such file in turn; the
+/// daemon must stay up throughout, and a fresh client must receive frames afterwards. (The
+/// clients' side: [`a_client_scribbling_on_the_shared_records_cannot_crash_another_client`].)
+#[test]
+fn a_client_scribbling_on_the_shared_records_cannot_crash_the_daemon() {
+    if !is_root() {
+        eprintln!("not root: cannot run clients as another user; not checked");
+        return;
+    }
+    // Longer by hand: DEAR_SCRIBBLE_WRITES=20000 DEAR_SCRIBBLE_SEED=7 (docs/security.md).
+    let (writes, seed) = scribble_settings(600, 0x34);
     let s = setup(NOBODY);
     let service = unique_service("scribble");
     let mut daemon = s.daemon(&service, "deard.log");
@@ -529,37 +688,11 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_the_daemon() {
     let mut kinds = [0usize; 2];
     // Clients that connect again when the daemon made the service again (their old one is
     // gone): there is always a connection to scribble on. Killed at the end.
-    struct Clients(Vec<std::process::Child>);
-    impl Drop for Clients {
-        fn drop(&mut self) {
-            for c in &mut self.0 {
-                let _ = c.kill();
-                let _ = c.wait();
-            }
-        }
-    }
-    let mut clients = Clients(Vec::new());
+    let mut clients = Clients::new(&s.dir);
     let mut first = Vec::new();
     for i in 0..writes {
         if i % 20 == 19 && s.files(".connection").is_empty() {
-            clients.0.push(
-                Command::new(dear_test_support::paths::binary("dear-probe"))
-                    .args([
-                        "--service",
-                        &service,
-                        "--count",
-                        "1000000",
-                        "--timeout-s",
-                        "300",
-                    ])
-                    .env(dear_proto::IOX2_ROOT_ENV, &s.root)
-                    .uid(NOBODY)
-                    .gid(NOBODY)
-                    .stdout(std::process::Stdio::null())
-                    .stderr(std::process::Stdio::null())
-                    .spawn()
-                    .unwrap(),
-            );
+            clients.start(&s.root, &service);
         }
         // First half: the connections only (the victim's, then the clients' that came
         // after it died); second half: the service's records too. A client scribbling on
@@ -599,31 +732,126 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_the_daemon() {
         kinds[1],
         daemon.log_text().matches("a client damaged the service's shared records").count()
     );
-    // The daemon notices damaged records within two checks (a second apart) and makes the
-    // service again; a client that came meanwhile is refused by the damaged records or gets
-    // no frames, and connects again, as after any restart of the service. Each try is a
-    // whole client run: 3 frames or a 5 s timeout, a second after the last.
-    let mut refused = Vec::new();
-    let served = (0..10).any(|_| {
-        // A client that connects again waits a little first (the daemon checks every second).
-        std::thread::sleep(Duration::from_secs(1));
-        let out = Command::new(dear_test_support::paths::binary("dear-probe"))
-            .args(["--service", &service, "--count", "3", "--timeout-s", "5"])
-            .env(dear_proto::IOX2_ROOT_ENV, &s.root)
-            .uid(NOBODY)
-            .gid(NOBODY)
-            .output()
-            .unwrap();
-        refused.push(String::from_utf8_lossy(&out.stderr).into_owned());
-        out.status.success()
-    });
+    a_fresh_client_receives(&s, &service, &mut daemon);
+}
+
+/// Defect 1, the receiving side: a write into a `*.dynamic` or `*.connection` record by one
+/// member of the group crashed *other clients* (every subscriber reads both: the queue of
+/// offsets the daemon sends into its connection, the list of publishers in the service's
+/// record). The patched iceoryx2 (third_party/README.md) checks on the subscriber's side too
+/// every offset, position and size it reads from them; a client that finds its channel
+/// corrupted gets an error naming it and connects again. Here three clients (`nobody`)
+/// receive while 600 seeded writes (random bytes, bit flips, overwritten headers,
+/// truncations) go into the clients' connections (first half) and the service's records
+/// (second half, with the connections); no client may die by a signal or a panic (one that
+/// gives up must say why, and another takes its place), and a fresh client receives frames
+/// afterwards.
+#[test]
+fn a_client_scribbling_on_the_shared_records_cannot_crash_another_client() {
+    if !is_root() {
+        eprintln!("not root: cannot run clients as another user; not checked");
+        return;
+    }
+    let (writes, seed) = scribble_settings(600, 0x35);
+    let s = setup(NOBODY);
+    let service = unique_service("scribble-clients");
+    let mut daemon = s.daemon(&service, "deard.log");
+    daemon
+        .wait_for_log_line("serving", WAIT)
+        .expect("deard serves");
+    const CLIENTS: usize = 3;
+    let mut clients = Clients::new(&s.dir);
+    for _ in 0..CLIENTS {
+        clients.start(&s.root, &service);
+    }
+    // Every client receives before the first write.
+    wait_until(
+        "a frame received by every client",
+        WAIT,
+        || clients.children.iter().all(|c| c.received() > 0),
+        || daemon.log_text(),
+    );
+    let mut scribbler = Scribbler(seed);
+    let mut kinds = [0usize; 2];
+    let mut gave_up = Vec::new();
+    for i in 0..writes {
+        for (status, err) in clients.ended() {
+            use std::os::unix::process::ExitStatusExt;
+            assert!(
+                status.signal().is_none() && status.code() != Some(101),
+                "a client died ({status}) after write {i} of seed {seed}: {err}"
+            );
+            // Not a crash: it said why (e.g. its channel was corrupted) and exited.
+            assert!(err.contains("dear-probe: "), "{status}: {err:?}");
+            gave_up.push(err);
+        }
+        // Clients that stopped receiving make way for new ones (a second or more of writes).
+        if i % 100 == 99 {
+            clients.retire_idle();
+        }
+        // One at a time: a client that gives up at once is not replaced in a busy loop.
+        if clients.running() < CLIENTS {
+            clients.start(&s.root, &service);
+        }
+        // First half: the clients' connections only (what a receiving client reads most);
+        // second half: the service's records too (which keep new clients out while damaged).
+        let files = if i < writes / 2 {
+            s.files(".connection")
+        } else {
+            [s.files(".connection"), s.files(".dynamic")].concat()
+        };
+        if files.is_empty() {
+            std::thread::sleep(Duration::from_millis(20));
+            continue;
+        }
+        let file = &files[scribbler.below(files.len())];
+        kinds[usize::from(file.to_str().unwrap().ends_with(".dynamic"))] += 1;
+        scribbler.scribble(file);
+        // Let a few frames go through the damage.
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    // Every client's end after the last write, before they are killed.
+    std::thread::sleep(Duration::from_millis(500));
+    for (status, err) in clients.ended() {
+        use std::os::unix::process::ExitStatusExt;
+        assert!(
+            status.signal().is_none() && status.code() != Some(101),
+            "a client died ({status}) after the last write of seed {seed}: {err}"
+        );
+        gave_up.push(err);
+    }
     assert!(
-        served,
-        "no fresh client received 3 frames in 10 tries: {refused:#?}\n{}",
+        kinds[0] > 0 && kinds[1] > 0,
+        "writes into connections, dynamic records: {kinds:?}\n{}",
         daemon.log_text()
     );
+    // Frames the clients received meanwhile: they were receiving while the records changed.
+    let frames: usize = (0..clients.started)
+        .map(|n| count_frames(&s.dir.join(format!("client-{n}.out"))))
+        .sum();
+    eprintln!(
+        "seed {seed}: {} writes into connections, {} into the services' records; {} clients started, {frames} frames received, {} gave up (none crashed; {} of them told their channel was corrupted); the daemon made the service again {} times; the first to give up: {:?}",
+        kinds[0],
+        kinds[1],
+        clients.started,
+        gave_up.len(),
+        gave_up.iter().filter(|e| e.contains("was corrupted")).count(),
+        daemon.log_text().matches("a client damaged the service's shared records").count(),
+        gave_up.first()
+    );
+    if std::env::var_os("DEAR_SCRIBBLE_REASONS").is_some() {
+        let mut reasons = std::collections::BTreeMap::<String, usize>::new();
+        for e in &gave_up {
+            let line = e
+                .lines()
+                .rev()
+                .find(|l| l.starts_with("dear-probe: "))
+                .unwrap_or("?");
+            *reasons.entry(line.chars().take(400).collect()).or_default() += 1;
+        }
+        eprintln!("{reasons:#?}");
+    }
+    drop(clients);
     assert!(daemon.is_running(), "{}", daemon.log_text());
-    let fresh = s.probe(&service, NOBODY);
-    receives(&fresh, 10, &mut daemon);
-    assert!(daemon.is_running(), "{}", daemon.log_text());
+    a_fresh_client_receives(&s, &service, &mut daemon);
 }

@@ -385,6 +385,30 @@ pub mod details {
             Some(value)
         }
 
+        /// DEAR PATCH: [`IndexQueue::push()`] with the slots' address and the capacity given by
+        /// the caller (kept privately) instead of read from memory another process writes: the
+        /// positions the other side writes only select a slot within `data[..capacity]`;
+        /// wrapping position arithmetic.
+        ///
+        /// # Safety
+        ///
+        ///   * as [`IndexQueue::push()`]; `data` must point to `capacity` > 0 slots that stay
+        ///     mapped while this runs.
+        pub unsafe fn dear_push(&self, data: *const UnsafeCell<u64>, capacity: usize, value: u64) -> bool {
+            let write_position = self.write_position.load(Ordering::Relaxed);
+            if capacity == 0
+                || write_position == self.read_position.load(Ordering::Acquire).wrapping_add(capacity as u64)
+            {
+                return false;
+            }
+            let cell = unsafe { &*data.add((write_position % capacity as u64) as usize) };
+            // Volatile: the other side may read or write the slot at any time.
+            unsafe { core::ptr::write_volatile(cell.get(), value) };
+            self.write_position
+                .store(write_position.wrapping_add(1), Ordering::Release);
+            true
+        }
+
         fn acquire_read_and_write_position(&self) -> (u64, u64) {
             loop {
                 let write_position = self.write_position.load(Ordering::Relaxed);

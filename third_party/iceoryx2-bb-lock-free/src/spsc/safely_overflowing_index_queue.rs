@@ -456,6 +456,55 @@ pub mod details {
             }
         }
 
+        /// DEAR PATCH: [`SafelyOverflowingIndexQueue::pop()`] with the slots' address and the
+        /// capacity given by the caller (kept privately; the queue has `capacity + 1` slots)
+        /// instead of read from memory another process writes; wrapping position arithmetic,
+        /// volatile slot reads, and at most `capacity + 2` tries when the position changes
+        /// under it (the producer takes the oldest value on overflow; a process that keeps
+        /// rewriting the position cannot keep the caller spinning: then `None`). The value was
+        /// stored in shared memory: validate it.
+        ///
+        /// # Safety
+        ///
+        ///   * as [`SafelyOverflowingIndexQueue::pop()`]; `data` must point to `capacity + 1`
+        ///     slots that stay mapped while this runs.
+        pub unsafe fn dear_pop(&self, data: *const UnsafeCell<u64>, capacity: usize) -> Option<u64> {
+            let slots = capacity as u64 + 1;
+            let at = |position: u64| unsafe { (*data.add((position % slots) as usize)).get() };
+            let mut read_position = self.read_position.load(Ordering::Relaxed);
+            if read_position == self.write_position.load(Ordering::Acquire) {
+                return None;
+            }
+            for _ in 0..capacity + 2 {
+                let value = unsafe { core::ptr::read_volatile(at(read_position)) };
+                match self.read_position.compare_exchange(
+                    read_position,
+                    read_position.wrapping_add(1),
+                    Ordering::Relaxed,
+                    Ordering::Acquire,
+                ) {
+                    Ok(_) => return Some(value),
+                    Err(v) => read_position = v,
+                }
+            }
+            None
+        }
+
+        /// DEAR PATCH: whether the positions describe at most `capacity + 1` queued values (the
+        /// most a producer leaves while it overflows): false when another process rewrote
+        /// them (every pop would then hand out old slot contents again).
+        pub fn dear_positions_plausible(&self, capacity: usize) -> bool {
+            let write_position = self.write_position.load(Ordering::Relaxed);
+            let read_position = self.read_position.load(Ordering::Relaxed);
+            write_position.wrapping_sub(read_position) <= capacity as u64 + 1
+        }
+
+        /// DEAR PATCH: [`SafelyOverflowingIndexQueue::is_empty()`] with one read of each
+        /// position (no retry loop another process can keep spinning).
+        pub fn dear_is_empty(&self) -> bool {
+            self.write_position.load(Ordering::Relaxed) == self.read_position.load(Ordering::Relaxed)
+        }
+
         /// DEAR PATCH: [`SafelyOverflowingIndexQueue::is_full()`] with the capacity kept
         /// privately; one read of each position (no retry loop another process can keep
         /// spinning), wrapping arithmetic.

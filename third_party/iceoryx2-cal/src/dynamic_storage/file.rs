@@ -253,6 +253,15 @@ impl<T: Send + Sync + Debug + ZeroCopySend> Builder<'_, T> {
             }
         };
 
+        // DEAR PATCH: another process may have truncated the file: a mapping shorter than the
+        // storage's fixed part would let every field beyond it be read outside the mapping
+        // (and outside the range registered below, so unchecked).
+        if (file_size as usize) < core::mem::size_of::<Data<T>>() {
+            fail!(from self, with DynamicStorageOpenError::InternalError,
+                "{} since the file has {} bytes, fewer than the {} of the storage's fixed part: it was truncated (DEAR PATCH).",
+                msg, file_size, core::mem::size_of::<Data<T>>());
+        }
+
         let memory_mapping = match MemoryMappingBuilder::from_file_descriptor(fd)
             .mapping_behavior(MappingBehavior::Shared)
             .initial_mapping_permission(access_mode.into())
@@ -531,6 +540,10 @@ impl<T: Debug + Send + Sync + ZeroCopySend> Abandonable for Storage<T> {
     unsafe fn abandon_in_place(mut this: NonNull<Self>) {
         let this = unsafe { this.as_mut() };
         unsafe { File::abandon_in_place(NonNull::from_mut(&mut this.file)) };
+        // DEAR PATCH: the mapping goes: its range must leave the table too (see
+        // `dear_registered`), or a later mapping at the same address would be checked against
+        // this one's bounds.
+        iceoryx2_bb_lock_free::dear_shared::unregister(this.memory_mapping.base_address() as usize);
         unsafe {
             core::ptr::drop_in_place(&mut this.memory_mapping);
         }

@@ -658,6 +658,20 @@ pub mod details {
             &self,
             port_to_register: State,
         ) -> Result<(Storage, Option<TrustedLayout>), ZeroCopyCreationError> {
+            // DEAR PATCH: a receiver's number of chunks comes from the sender's entry in the
+            // service's shared record (`PublisherDetails`, which any participant can write): a
+            // size that cannot be a connection's is refused before the arithmetic below
+            // overflows (a panic in debug builds).
+            const DEAR_LIMIT: usize = 1 << 24;
+            if self.number_of_samples_per_segment > DEAR_LIMIT
+                || self.buffer_size > DEAR_LIMIT
+                || self.max_borrowed_samples_per_channel > DEAR_LIMIT
+                || self.number_of_channels > DEAR_LIMIT
+            {
+                fail!(from self, with ZeroCopyCreationError::ConnectionMaybeCorrupted,
+                    "Failed to acquire underlying shared memory since its parameters are out of range (number of samples {}, buffer size {}, max borrowed samples {}, channels {}): read from a corrupted record (DEAR PATCH).",
+                    self.number_of_samples_per_segment, self.buffer_size, self.max_borrowed_samples_per_channel, self.number_of_channels);
+            }
             let supplementary_size = SharedManagementData::const_memory_size(
                 self.submission_queue_size(),
                 self.completion_queue_size(),
@@ -721,16 +735,19 @@ pub mod details {
 
             storage.get().reserve_port(port_to_register.value(), msg)?;
 
-            // DEAR PATCH: a sender checks the whole shared layout against the one it computes
-            // and keeps its own copy (`TrustedLayout`); the upstream checks below index the
-            // shared vectors as they say, which a corrupted record turns into an abort.
-            let trusted = if matches!(port_to_register, State::Sender) {
+            // DEAR PATCH: a sender, and a receiver too, checks the whole shared layout against
+            // the one it computes and keeps its own copy (`TrustedLayout`); the upstream checks
+            // below index the shared vectors as they say, which a corrupted record turns into
+            // an abort. (A connection whose settings differ from this port's is refused here
+            // as `ConnectionMaybeCorrupted` rather than by the specific upstream error.)
+            let trusted = if matches!(port_to_register, State::Sender | State::Receiver) {
                 match TrustedLayout::new(&storage, self) {
                     Ok(trusted) => Some(trusted),
                     Err(why) => {
                         cleanup_shared_memory(&storage, port_to_register);
                         fail!(from self, with ZeroCopyCreationError::ConnectionMaybeCorrupted,
-                            "{} since its shared record is not the layout this sender expects: {} (DEAR PATCH).", msg, why);
+                            "{} since its shared record is not the layout this {} expects: {} (DEAR PATCH).",
+                            msg, if matches!(port_to_register, State::Sender) { "sender" } else { "receiver" }, why);
                     }
                 }
             } else {
@@ -884,11 +901,15 @@ pub mod details {
         ) -> Result<<Connection<Storage> as ZeroCopyConnection>::Receiver, ZeroCopyCreationError>
         {
             let msg = "Unable to create receiver";
-            let (storage, _) = fail!(from self, when self.create_or_open_shm(State::Receiver),
+            let (storage, trusted) = fail!(from self, when self.create_or_open_shm(State::Receiver),
             "{} since the corresponding connection could not be created or opened", msg);
+            let Some(trusted) = trusted else {
+                fatal_panic!(from self, "This should never happen! A receiver has a trusted layout.");
+            };
 
             Ok(Receiver {
                 storage,
+                trusted,
                 borrow_counter: {
                     let mut borrow_counter = vec![];
                     for _ in 0..self.number_of_channels {
@@ -1020,6 +1041,11 @@ pub mod details {
                 Some(v) => match trusted.take_back(v, channel_id.value()) {
                     Some(pointer_offset) => Ok(Some(pointer_offset)),
                     None => {
+                        // The sample just queued is not counted as delivered by the caller
+                        // (this is an error): it must not be given back as lent either when
+                        // the connection is removed (`acquire_used_offsets`), or its chunk's
+                        // reference count would drop below the deliveries it counts.
+                        trusted.set_lent(details, index, false);
                         trusted.mark_corrupted(&self.name, "overwrote its receive queue with an offset", v);
                         fail!(from self, with ZeroCopySendError::ConnectionCorrupted,
                             "{} since the invalid offset {:#x} was returned on overflow.", msg, v);
@@ -1212,6 +1238,9 @@ pub mod details {
         storage: Storage,
         borrow_counter: Vec<UnsafeCell<usize>>,
         name: FileName,
+        // DEAR PATCH: everything the receiver reads of the layout comes from here (the sender,
+        // or any process that can write the record, may have overwritten the shared one).
+        trusted: TrustedLayout,
     }
 
     impl<Storage: DynamicStorage<SharedManagementData>> Abandonable for Receiver<Storage> {
@@ -1236,6 +1265,7 @@ pub mod details {
                 &mut *self.borrow_counter[channel_id.value()].get()
             }
         }
+
     }
 
     impl<Storage: DynamicStorage<SharedManagementData>> NamedConcept for Receiver<Storage> {
@@ -1244,21 +1274,22 @@ pub mod details {
         }
     }
 
+    // DEAR PATCH: from the receiver's private layout, not the shared record.
     impl<Storage: DynamicStorage<SharedManagementData>> ZeroCopyPortDetails for Receiver<Storage> {
         fn buffer_size(&self) -> usize {
-            self.storage.get().channels[0].submission_queue.capacity()
+            self.trusted.channels[0].submission.capacity
         }
 
         fn max_supported_shared_memory_segments(&self) -> u8 {
-            self.storage.get().number_of_segments
+            self.trusted.number_of_segments as u8
         }
 
         fn max_borrowed_chunks(&self) -> usize {
-            self.storage.get().max_borrowed_samples
+            self.trusted.max_borrowed_samples
         }
 
         fn has_enabled_safe_overflow(&self) -> bool {
-            self.storage.get().enable_safe_overflow
+            self.trusted.enable_safe_overflow
         }
 
         fn is_connected(&self) -> bool {
@@ -1266,50 +1297,84 @@ pub mod details {
         }
 
         fn number_of_channels(&self) -> usize {
-            self.storage.get().channels.capacity()
+            self.trusted.channels.len()
         }
 
         fn __internal_get_channel_state(&self, channel_id: ChannelId) -> &AtomicU64 {
-            debug_assert!(channel_id.value() < self.storage.get().channels.capacity());
-            &self.storage.get().channels[channel_id.value()].state
+            debug_assert!(channel_id.value() < self.trusted.channels.len());
+            let c = &self.trusted.channels[channel_id.value()];
+            &self.trusted.channel_ref(c).state
         }
     }
 
+    // DEAR PATCH: every method reads the layout from `self.trusted` (see `TrustedLayout`); the
+    // queue positions only select a slot modulo the private capacity, and an offset read from
+    // the submission queue is accepted only if it names a segment of the connection (the data
+    // segment's bounds are checked by the caller, which maps it). A corrupted connection has
+    // "data" (so that the caller reaches `receive`) and `receive` fails with
+    // `ConnectionCorrupted`.
     impl<Storage: DynamicStorage<SharedManagementData>> ZeroCopyReceiver for Receiver<Storage> {
         fn has_data(&self, channel_id: ChannelId) -> bool {
-            debug_assert!(channel_id.value() < self.storage.get().channels.capacity());
-            !self.storage.get().channels[channel_id.value()]
-                .submission_queue
-                .is_empty()
+            if self.trusted.corrupted.load(Ordering::Relaxed) {
+                return true;
+            }
+            let Some(channel) = self.trusted.channel(channel_id) else {
+                return false;
+            };
+            !self.trusted.channel_ref(channel).submission_queue.dear_is_empty()
         }
 
         fn receive(
             &self,
             channel_id: ChannelId,
         ) -> Result<Option<PointerOffset>, ZeroCopyReceiveError> {
-            debug_assert!(channel_id.value() < self.storage.get().channels.capacity());
+            let trusted = &self.trusted;
+            if trusted.corrupted.load(Ordering::Relaxed) {
+                fail!(from self, with ZeroCopyReceiveError::ConnectionCorrupted,
+                    "Unable to receive another sample since the connection is corrupted.");
+            }
+            let Some(channel) = trusted.channel(channel_id) else {
+                return Ok(None);
+            };
 
-            if *self.borrow_counter(channel_id) >= self.storage.get().max_borrowed_samples {
+            if *self.borrow_counter(channel_id) >= trusted.max_borrowed_samples {
                 fail!(from self, with ZeroCopyReceiveError::ReceiveWouldExceedMaxBorrowValue,
                 "Unable to receive another sample since already {} samples were borrowed and this would exceed the max borrow value of {}.",
                     self.borrow_counter(channel_id), self.max_borrowed_chunks());
             }
 
+            let queue = &trusted.channel_ref(channel).submission_queue;
+            if !queue.dear_positions_plausible(channel.submission.capacity) {
+                self.dear_mark_corrupted("its receive queue's positions were overwritten", 0);
+                fail!(from self, with ZeroCopyReceiveError::ConnectionCorrupted,
+                    "Unable to receive another sample since the receive queue's positions were overwritten.");
+            }
+            // SAFETY: the slots' address and capacity were computed and checked privately.
             match unsafe {
-                self.storage.get().channels[channel_id.value()]
-                    .submission_queue
-                    .pop()
+                queue.dear_pop(
+                    channel.submission.data as *const UnsafeCell<u64>,
+                    channel.submission.capacity,
+                )
             } {
                 None => Ok(None),
                 Some(v) => {
+                    let offset = PointerOffset::from_value(v);
+                    if offset.segment_id().value() as usize >= trusted.number_of_segments {
+                        self.dear_mark_corrupted("it delivered an offset of a segment it does not have", v);
+                        fail!(from self, with ZeroCopyReceiveError::ConnectionCorrupted,
+                            "Unable to receive another sample since the received offset {:#x} names no segment of the connection.", v);
+                    }
                     *self.borrow_counter(channel_id) += 1;
-                    Ok(Some(PointerOffset::from_value(v)))
+                    Ok(Some(offset))
                 }
             }
         }
 
         fn borrow_count(&self, channel_id: ChannelId) -> usize {
-            *self.borrow_counter(channel_id)
+            match self.borrow_counter.get(channel_id.value()) {
+                Some(_) => *self.borrow_counter(channel_id),
+                None => 0,
+            }
         }
 
         fn release(
@@ -1317,15 +1382,28 @@ pub mod details {
             ptr: PointerOffset,
             channel_id: ChannelId,
         ) -> Result<(), ZeroCopyReleaseError> {
-            debug_assert!(channel_id.value() < self.storage.get().channels.capacity());
+            let trusted = &self.trusted;
+            let Some(channel) = trusted.channel(channel_id) else {
+                return Ok(());
+            };
+            let counter = self.borrow_counter(channel_id);
+            if trusted.corrupted.load(Ordering::Relaxed) {
+                // Nothing goes back through a corrupted connection; the sender takes its
+                // chunks back when the connection is removed.
+                *counter = counter.saturating_sub(1);
+                return Ok(());
+            }
 
+            // SAFETY: the slots' address and capacity were computed and checked privately.
             match unsafe {
-                self.storage.get().channels[channel_id.value()]
-                    .completion_queue
-                    .push(ptr.as_value())
+                trusted.channel_ref(channel).completion_queue.dear_push(
+                    channel.completion.data as *const UnsafeCell<u64>,
+                    channel.completion.capacity,
+                    ptr.as_value(),
+                )
             } {
                 true => {
-                    *self.borrow_counter(channel_id) -= 1;
+                    *counter = counter.saturating_sub(1);
                     Ok(())
                 }
                 false => {
@@ -1334,7 +1412,21 @@ pub mod details {
                 }
             }
         }
+
+        /// DEAR PATCH: marks the connection corrupted (logged once, counted in `dear_shared`):
+        /// from then on `receive` fails with `ConnectionCorrupted` and nothing is returned to
+        /// the sender through it.
+        fn dear_mark_corrupted(&self, what: &str, value: u64) {
+            if !self.trusted.corrupted.swap(true, Ordering::Relaxed) {
+                iceoryx2_bb_lock_free::dear_shared::note_corruption();
+                iceoryx2_log::error!(
+                    "DEAR PATCH: zero-copy connection {:?}: {} ({:#x}); the connection is marked corrupted: nothing more is received from or returned through it (connect again)",
+                    self.name, what, value
+                );
+            }
+        }
     }
+
 
     #[derive(Debug)]
     pub struct Connection<Storage: DynamicStorage<SharedManagementData>> {

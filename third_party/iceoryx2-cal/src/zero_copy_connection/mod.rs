@@ -96,6 +96,9 @@ impl core::error::Error for ZeroCopySendError {}
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ZeroCopyReceiveError {
     ReceiveWouldExceedMaxBorrowValue,
+    /// DEAR PATCH: the connection's shared record was found corrupted (an offset that names
+    /// no segment of it); nothing more is received through it.
+    ConnectionCorrupted,
 }
 
 impl core::fmt::Display for ZeroCopyReceiveError {
@@ -372,6 +375,13 @@ pub trait ZeroCopyReceiver:
         channel_id: ChannelId,
     ) -> Result<(), ZeroCopyReleaseError>;
     fn borrow_count(&self, channel_id: ChannelId) -> usize;
+
+    /// DEAR PATCH: the caller found an offset received through this connection unusable
+    /// (`what`: why, as "it delivered an offset that ...") and drops it: the connection is
+    /// marked corrupted (logged once), later
+    /// receives fail with [`ZeroCopyReceiveError::ConnectionCorrupted`]. Does nothing for
+    /// connections that cannot be corrupted by another process.
+    fn dear_mark_corrupted(&self, _what: &str, _value: u64) {}
 }
 
 pub trait ZeroCopyConnection: Debug + Sized + NamedConceptMgmt {

@@ -283,6 +283,11 @@ pub enum ReceiveError {
 
     /// Occurs when a receiver is unable to connect to a corresponding sender.
     ConnectionFailure(ConnectionFailure),
+
+    /// DEAR PATCH: the connection to a sender was corrupted: its shared record held an offset
+    /// that names no sample of the sender's data segment (another process wrote into the
+    /// record). Nothing more is received through it; create the receiving port again.
+    ConnectionCorrupted,
 }
 
 impl From<ConnectionFailure> for ReceiveError {

@@ -277,7 +277,11 @@ impl<
             subscriber_max_borrowed_samples
         };
 
-        let number_of_active_connections = publisher_list.capacity();
+        // DEAR PATCH: from the service's static record (written once by its creator, read-only),
+        // not the publisher list's capacity in the shared dynamic record, which another
+        // process may have overwritten (a corrupted list reads as capacity 0, and a vector of
+        // 0 connections panicked here). `update_connection` skips indices beyond it.
+        let number_of_active_connections = static_config.max_publishers.max(1);
         let number_of_connections =
             number_of_to_be_removed_connections + number_of_active_connections;
 
@@ -367,6 +371,10 @@ impl<
         let mut result = Ok(());
         unsafe {
             (*subscriber_shared_state.publisher_list_state.get()).for_each(|index, details| {
+                // DEAR PATCH: an index from a shared list another process may have rewritten.
+                if index >= subscriber_shared_state.receiver.connections.len() {
+                    return CallbackProgression::Continue;
+                }
                 let inner_result = subscriber_shared_state.receiver.update_connection(
                     index,
                     SenderDetails {
@@ -421,10 +429,30 @@ impl<
         fail!(from self, when self.update_connections(),
                 "Some samples are not being received since not all connections to publishers could be established.");
 
-        self.subscriber_shared_state
-            .lock()
-            .receiver
-            .receive(ChannelId::new(0))
+        let subscriber_shared_state = self.subscriber_shared_state.lock();
+        let receiver = &subscriber_shared_state.receiver;
+        let received = receiver.receive(ChannelId::new(0))?;
+        // DEAR PATCH: the sample's offset came from the connection's shared record (another
+        // process may have written it): its length, as its header in the sender's data
+        // segment says, must fit in that segment (the start was checked by the receiver).
+        if let Some((details, chunk)) = &received {
+            // SAFETY: the receiver checked that the header lies in the mapped segment, aligned.
+            let elements = unsafe {
+                core::ptr::read_volatile(core::ptr::addr_of!(
+                    (*(chunk.header_ptr() as *const crate::service::header::publish_subscribe::Header))
+                        .number_of_elements
+                ))
+            };
+            let bytes = usize::try_from(elements)
+                .ok()
+                .and_then(|n| n.checked_mul(receiver.message_type_details.payload.size));
+            if !receiver.dear_sample_fits(details, chunk.payload_ptr() as usize, bytes) {
+                fail!(from self, with ReceiveError::ConnectionCorrupted,
+                    "Unable to receive a sample since the sample the connection named ({} elements) does not fit in the sender's data segment: the connection is corrupted.",
+                    elements);
+            }
+        }
+        Ok(received)
     }
 }
 

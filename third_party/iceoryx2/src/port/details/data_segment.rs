@@ -310,6 +310,20 @@ impl<Service: service::Service> DataSegmentView<Service> {
         }
     }
 
+    /// DEAR PATCH: the bounds `[start, end)` of a static data segment's payload in this
+    /// process's mapping, to check an address translated from an offset that was read from
+    /// a connection's shared record (which other processes can write); `None` for a dynamic
+    /// segment (not checked).
+    pub(crate) fn dear_bounds(&self) -> Option<(usize, usize)> {
+        match &self.memory {
+            MemoryViewType::Static(memory) => {
+                let start = memory.payload_start_address();
+                Some((start, start.checked_add(memory.size())?))
+            }
+            MemoryViewType::Dynamic(_) => None,
+        }
+    }
+
     pub(crate) unsafe fn unregister_offset(&self, offset: PointerOffset) {
         unsafe {
             if let MemoryViewType::Dynamic(memory) = &self.memory {

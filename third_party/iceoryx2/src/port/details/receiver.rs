@@ -456,18 +456,94 @@ impl<Service: service::Service, Resource: ServiceResource> Receiver<Service, Res
                         }
                     };
 
+                    // DEAR PATCH: the offset was read from the connection's shared record: the
+                    // sample it names must lie in the sender's data segment, aligned, with
+                    // room for the number of elements its header (written by the sender into
+                    // its own segment) says. Otherwise the connection is corrupted.
+                    if let Some(why) = self.dear_check_sample(connection, offset) {
+                        connection.receiver.dear_mark_corrupted(
+                            &format!("it delivered an offset that {why}"),
+                            details.offset.as_value(),
+                        );
+                        fail!(from self, with ReceiveError::ConnectionCorrupted,
+                            "{} since the offset {:?} received from sender {:?} {}: the connection is corrupted.",
+                            msg, details.offset, connection.sender_port_id, why);
+                    }
+
                     Ok(Some((
                         details,
                         Chunk::new(&self.message_type_details, offset),
                     )))
                 }
             },
+            Err(ZeroCopyReceiveError::ConnectionCorrupted) => {
+                fail!(from self, with ReceiveError::ConnectionCorrupted,
+                    "{} since the connection to sender {:?} is corrupted.",
+                    msg, connection.sender_port_id);
+            }
             Err(ZeroCopyReceiveError::ReceiveWouldExceedMaxBorrowValue) => {
                 fail!(from self, with ReceiveError::ExceedsMaxBorrows,
                     "{} since it would exceed the maximum {} of borrowed chunks.",
                     msg, connection.receiver.max_borrowed_chunks());
             }
         }
+    }
+
+    /// DEAR PATCH: why the sample at `address` (translated from an offset read from a
+    /// connection's shared record) cannot be read, if it cannot: outside the sender's static
+    /// data segment, misaligned, or without room for its headers and one element. (The
+    /// number of elements its header says is checked by the port that knows the header:
+    /// [`Receiver::dear_sample_fits`].)
+    fn dear_check_sample(
+        &self,
+        connection: &Connection<Service, Resource>,
+        address: usize,
+    ) -> Option<&'static str> {
+        let (start, end) = connection.data_segment.dear_bounds()?;
+        let details = &self.message_type_details;
+        if address < start || address >= end {
+            return Some("lies outside the sender's data segment");
+        }
+        if !address.is_multiple_of(details.header.alignment.max(1)) {
+            return Some("is misaligned");
+        }
+        let payload = details.payload_ptr_from_header(address as *const u8) as usize;
+        if payload
+            .checked_add(details.payload.size)
+            .is_none_or(|payload_end| payload_end > end)
+        {
+            return Some("names a sample that does not fit in the sender's data segment");
+        }
+        None
+    }
+
+    /// DEAR PATCH: whether a received sample whose payload starts at `payload` and holds
+    /// `bytes` bytes (as its header says) lies in the data segment of the connection it came
+    /// through; when not, that connection is marked corrupted. True for dynamic segments (not
+    /// checked) and connections that are gone.
+    pub(crate) fn dear_sample_fits(
+        &self,
+        chunk: &ChunkDetails,
+        payload: usize,
+        bytes: Option<usize>,
+    ) -> bool {
+        let connection_storage = unsafe { &*self.connection_storage.get() };
+        let Some(connection) = connection_storage.get(chunk.connection_key) else {
+            return true;
+        };
+        let Some((_, end)) = connection.data_segment.dear_bounds() else {
+            return true;
+        };
+        let fits = bytes
+            .and_then(|b| payload.checked_add(b))
+            .is_some_and(|payload_end| payload_end <= end);
+        if !fits {
+            connection.receiver.dear_mark_corrupted(
+                "it delivered an offset whose sample's length does not fit in the sender's data segment",
+                chunk.offset.as_value(),
+            );
+        }
+        fits
     }
 
     fn receive_from_to_be_removed_connections(
