@@ -80,32 +80,28 @@ pub struct DirectFitParams {
     /// Gaussian blur of both edge maps at every level, in that level's px; the coarser levels
     /// are made from the blurred finer ones. Tuned on rendered views (`dear-synth perturb
     /// --seed 11` of the 40-frame tuning sets of five families, which no table reports; mean
-    /// AEPE at σ = 4 px of 640×480, default / clean / wide / empty / held-out family): one
-    /// 1 px blur everywhere 5.69 / 6.63 / 5.24 / 3.98 / 1.69 px; 0.5 px with 1 px at full
-    /// resolution ([`finest_blur_sigma`](Self::finest_blur_sigma)) 4.16 / 5.09 / 3.54 / 3.25 /
-    /// 1.32; at σ = 2 px 3.70 / 3.91 / 2.57 / 2.06 → 2.62 / 3.04 / 2.16 / 1.64 (default /
-    /// clean / wide / empty). Sharper search levels find the right basin more often.
+    /// AEPE of the fit without the network, px; σ = 2 / 4 px of 640×480 on the default family,
+    /// then σ = 4 on clean / wide / empty / held-out): the previous settings (0.5 px, 1 px at
+    /// full resolution, contour radius 0) 1.89 / 2.67, 2.82 / 1.36 / 1.28 / 1.32; 0.4 px
+    /// everywhere with contour radius 1 0.93 / 1.67, 1.26 / 0.62 / 1.07 / 1.14 (0.3: 0.98 /
+    /// 1.78, 1.26 / 0.59 / 1.04 / 1.08; 0.5: 1.40 / 1.64, 1.30 / 0.79 / 1.15 / 1.26; 0.7 or a
+    /// 1 px finest level worse on every set). Aligned tuning frames of every family stay at 0.
     pub blur_sigma: f32,
     /// Blur of the full-resolution level, where the fit ends, instead of `blur_sigma` (`None`:
-    /// the same). 1 px: with less, an aligned frame with sharp edges seen in RGB only (the unit
-    /// tests' striped wall) gained more than `min_gain` by moving half a pixel — bilinear
-    /// sampling between pixels smooths the RGB edge map, which lowers its variance and so
-    /// raises the correlation where RGB has unmatched edges; a 1 px blur leaves little for the
-    /// sampling to smooth. 0.5 px everywhere fitted the rendered sets a little better still
-    /// (σ = 4: 3.95 / 5.00 / 3.41 / 3.19 / 1.21); with 0.3 px everywhere that aligned frame
-    /// moved by 0.5 px.
+    /// the same). A 1 px finest blur was needed while the correlation was normalised by the
+    /// samples' own variance (see `Corr`): with less, an aligned frame with sharp edges seen
+    /// in RGB only (the unit tests' striped wall) gained more than `min_gain` by moving half
+    /// a pixel. With the map's variance it stays, and the sharper level fits better (above).
     pub finest_blur_sigma: Option<f32>,
     /// Weight of the depth-discontinuity edges in the ToF edge map (0 = amplitude only).
     pub depth_edge_weight: f32,
     /// A ToF pixel moves with the nearest valid surface within this radius (level px): the
     /// blurred edge of an occluding contour spreads onto the background, but the contour moves
-    /// with the foreground. 0: each pixel moves with its own depth. That is right for views
-    /// that leave disocclusions black; on rendered views (as above) 1–2 px fitted four families
-    /// better (σ = 4, radius 1 with the default blurs: 4.01 / 3.94 / 3.07 / 3.08 px, held-out
-    /// 1.35) and the
-    /// held-out one worse at 2 (1.69 → 2.39 with one 1 px blur), and on frames with splatted
-    /// views — the bundled demo sample and the parity fixture are such — even radius 1 made a
-    /// confident fit 35 px off. Left at 0 until those samples are rendered again.
+    /// with the foreground. 0: each pixel moves with its own depth, which is right only for
+    /// views that leave disocclusions black (splatted). On rendered views radius 1 fitted
+    /// every tuning family better (with the previous blurs, σ = 4: default 2.67 → 1.86,
+    /// clean 2.82 → 1.55, wide 1.36 → 0.97, empty 1.28 → 1.12, held-out 1.32 → 1.35 px);
+    /// 2 was no better and worse on the held-out family (1.85).
     pub contour_radius: usize,
     /// Edges of `log amplitude` (else of `√amplitude`).
     pub log_amplitude: bool,
@@ -151,10 +147,10 @@ impl Default for DirectFitParams {
             search_radius_px: 32.0,
             search_candidates: 3,
             search_lines: 6,
-            blur_sigma: 0.5,
-            finest_blur_sigma: Some(1.0),
+            blur_sigma: 0.4,
+            finest_blur_sigma: None,
             depth_edge_weight: 0.0,
-            contour_radius: 0,
+            contour_radius: 1,
             log_amplitude: true,
             suppress_border_holes: false,
             iterations: 10,
@@ -201,7 +197,7 @@ struct Level {
     inv_depth: Vec<f32>,
     rgb_w: usize,
     rgb_h: usize,
-    rgb: Vec<[f32; 3]>,
+    rgb: Vec<[f32; 4]>,
 }
 
 /// Fits the calibration directly to the edges of one frame; see the module docs.
@@ -603,15 +599,16 @@ fn downsample(img: &[f32], w: usize, h: usize, f: impl Fn([f32; 4]) -> f32) -> V
 }
 
 /// The image and its central-difference derivatives, interleaved.
-fn with_gradient(img: &[f32], w: usize, h: usize) -> Vec<[f32; 3]> {
-    let mut out = vec![[0.0f32; 3]; w * h];
+fn with_gradient(img: &[f32], w: usize, h: usize) -> Vec<[f32; 4]> {
+    let mut out = vec![[0.0f32; 4]; w * h];
     for y in 0..h {
         let (ym, yp) = (y.saturating_sub(1), (y + 1).min(h - 1));
         for x in 0..w {
             let (xm, xp) = (x.saturating_sub(1), (x + 1).min(w - 1));
             let gx = (img[y * w + xp] - img[y * w + xm]) / (xp - xm).max(1) as f32;
             let gy = (img[yp * w + x] - img[ym * w + x]) / (yp - ym).max(1) as f32;
-            out[y * w + x] = [img[y * w + x], gx, gy];
+            let v = img[y * w + x];
+            out[y * w + x] = [v, gx, gy, v * v];
         }
     }
     out
@@ -620,7 +617,7 @@ fn with_gradient(img: &[f32], w: usize, h: usize) -> Vec<[f32; 3]> {
 /// Bilinear sample of the interleaved RGB side at `(x, y)` (level px), `None` outside the
 /// convex hull of the pixel centres.
 #[inline(always)]
-fn sample(level: &Level, x: f32, y: f32) -> Option<[f32; 3]> {
+fn sample(level: &Level, x: f32, y: f32) -> Option<[f32; 4]> {
     let (w, h) = (level.rgb_w, level.rgb_h);
     if !(x >= 0.0 && y >= 0.0 && x <= (w - 1) as f32 && y <= (h - 1) as f32) {
         return None;
@@ -641,8 +638,8 @@ fn sample(level: &Level, x: f32, y: f32) -> Option<[f32; 3]> {
         (1.0 - fx) * fy,
         fx * fy,
     );
-    let mut out = [0.0f32; 3];
-    for k in 0..3 {
+    let mut out = [0.0f32; 4];
+    for k in 0..4 {
         out[k] = w00 * a[k] + w01 * b[k] + w10 * c[k] + w11 * d[k];
     }
     Some(out)
@@ -660,6 +657,15 @@ fn landing(level: &Level, theta: &Theta, x: usize, y: usize, a: f32) -> (f32, f3
 }
 
 /// Running sums for a correlation.
+///
+/// The RGB side is sampled bilinearly between pixels, which smooths it: at a half-pixel
+/// offset the samples of a map with detail the ToF side lacks (texture seen in RGB only) vary
+/// less, and a correlation normalised by the samples' own variance *rises* there — an aligned
+/// frame gained more than `min_gain` by moving half a pixel. So the correlation is normalised
+/// by the variance of the map itself around the landing points: the bilinear sample of the
+/// squared map (`sii_map`), which at a whole-pixel offset is the samples' own and between
+/// pixels does not shrink. The regression of the Gauss–Newton residual (`gain_offset`) keeps
+/// the samples' variance (`sii`).
 #[derive(Default, Clone, Copy)]
 struct Corr {
     n: f64,
@@ -667,17 +673,27 @@ struct Corr {
     stt: f64,
     si: f64,
     sii: f64,
+    sii_map: f64,
     sti: f64,
 }
 
 impl Corr {
+    /// A sample `i` taken at a pixel (no interpolation).
     #[inline]
     fn add(&mut self, t: f64, i: f64) {
+        self.add_sampled(t, i, i * i);
+    }
+
+    /// A sample `i` interpolated between pixels, with `i_sq` the squared map interpolated with
+    /// the same weights.
+    #[inline]
+    fn add_sampled(&mut self, t: f64, i: f64, i_sq: f64) {
         self.n += 1.0;
         self.st += t;
         self.stt += t * t;
         self.si += i;
         self.sii += i * i;
+        self.sii_map += i_sq;
         self.sti += t * i;
     }
 
@@ -687,6 +703,7 @@ impl Corr {
         self.stt += o.stt;
         self.si += o.si;
         self.sii += o.sii;
+        self.sii_map += o.sii_map;
         self.sti += o.sti;
     }
 
@@ -695,7 +712,7 @@ impl Corr {
             return None;
         }
         let vt = self.stt - self.st * self.st / self.n;
-        let vi = self.sii - self.si * self.si / self.n;
+        let vi = self.sii_map - self.si * self.si / self.n;
         let c = self.sti - self.st * self.si / self.n;
         (vt > 1e-9 && vi > 1e-9).then(|| c / (vt * vi).sqrt())
     }
@@ -720,8 +737,8 @@ fn correlation_at(level: &Level, theta: &Theta) -> Option<f64> {
                 continue;
             }
             let (px, py) = landing(level, theta, x, y, a);
-            let s = sample(level, px, py).unwrap_or([0.0; 3]);
-            c.add(level.t[i] as f64, s[0] as f64);
+            let s = sample(level, px, py).unwrap_or([0.0; 4]);
+            c.add_sampled(level.t[i] as f64, s[0] as f64, s[3] as f64);
         }
     }
     c.value()
@@ -1053,9 +1070,9 @@ fn normal_equations(level: &Level, theta: &Theta, k_robust: f32) -> Pass {
                 continue;
             }
             let (px, py) = landing(level, theta, x, y, a);
-            let [iv, ix, iy] = sample(level, px, py).unwrap_or([0.0; 3]);
+            let [iv, ix, iy, iv_sq] = sample(level, px, py).unwrap_or([0.0; 4]);
             let t = level.t[i];
-            corr.add(t as f64, iv as f64);
+            corr.add_sampled(t as f64, iv as f64, iv_sq as f64);
             let r = alpha * iv + beta - t;
             let r2 = r * r;
             sse_r += r2;
@@ -1308,7 +1325,7 @@ mod tests {
             inv_depth: vec![0.0; w * h],
             rgb_w: w,
             rgb_h: h,
-            rgb: vec![[0.0; 3]; w * h],
+            rgb: vec![[0.0; 4]; w * h],
         };
         let (px, py) = landing(&level, &Theta::from(truth), 30, 20, 1.0 / 1.5);
         assert!((px - 23.0).abs() < 1e-5 && (py - (20.0 - 1.0 / 6.0)).abs() < 1e-5);

@@ -125,8 +125,8 @@ pub mod test_scene {
     /// The direct fit of [`textured_scene`]`(truth)` from the identity, with the settings for
     /// real contours (a ToF contour moves with the nearer surface, depth edges added) and one
     /// blur of 1 px at every level: this scene's edges are aliased binary steps, sharper than
-    /// any rendered or camera image, and with the defaults' lighter search blur its fit ends
-    /// 1.03 px off at the discs' depths (0.5 px search blur was chosen on rendered views).
+    /// any rendered or camera image, and with the defaults' lighter blur (chosen on rendered
+    /// views) its fit ended 1.03 px off at the discs' depths.
     #[cfg(test)]
     pub(crate) fn fit_textured_scene(
         truth: &Calibration,
