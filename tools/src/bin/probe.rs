@@ -122,5 +122,8 @@ fn main() {
     // Every received frame is printed before the probe exits, whatever the status.
     drop(tx);
     printer.join().expect("the printing thread");
+    // Leaves the service (its subscriber and node slots are free at once, not after the
+    // daemon's next cleanup of dead nodes), even after an error.
+    drop(client);
     std::process::exit(status);
 }
