@@ -42,9 +42,9 @@ Run (OpenCV in its own venv, as scripts/opencv_baselines.py, whose capture reade
 `--tune` scores a grid of the four parameters on CAPTURE (tune on a set that is not reported).
 The defaults are the grid's best on a set no table reports: `dear-synth generate --count 40
 --seed 1234 --width 320 --height 240`, then `perturb --sigma 2 --seed 11` (σ = 4 px of 640×480,
-the RGB view rendered from the RGB camera): 4.64 px there, against 6.18 px static (blur 0, the
+the RGB view rendered from the RGB camera): 3.15 px there, against 6.32 px static (blur 0, the
 best on the earlier splatted views whose black disocclusions marked every occluding contour:
-5.78 px).
+3.76 px).
 """
 
 from __future__ import annotations

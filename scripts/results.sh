@@ -25,49 +25,65 @@ data=${DEAR_DATA:-data}/results
 out=out/results
 frames=${DEAR_RESULTS_FRAMES:-80}
 mkdir -p "$data" "$out"
-if [ ! -f "$data/aligned/capture.json" ]; then
+# Every set below is made again unless the simulator's source it was drawn with (synth/'s tree
+# at HEAD and any uncommitted change to it) is the current one, recorded in the set's
+# `.made-by`: a table must never score a set that an older or unfinished simulator drew (the
+# misaligned sets were once kept from a build whose RGB views had c_x's sign reversed,
+# because an earlier check only looked at how the view was made). Rendering is
+# deterministic, so an unchanged simulator makes the same sets.
+synth_stamp=$({
+    git rev-parse HEAD:synth
+    git diff HEAD -- synth
+} | sha256sum | cut -c1-16)
+current() { [ -f "$1/capture.json" ] && [ "$(cat "$1/.made-by" 2> /dev/null)" = "$synth_stamp" ]; }
+made() { echo "$synth_stamp" > "$1/.made-by"; }
+if ! current "$data/aligned"; then
+    rm -rf "$data/aligned"
     target/release/dear-synth generate --count "$frames" --seed 9001 --width 320 --height 240 \
         --out "$data/aligned"
+    made "$data/aligned"
 fi
 # The paper's σ ∈ {2, 4, 6} px are pixels of 640×480 images; at our 320×240 the same
 # misalignment is half as many pixels, so set "sigmaN" is rendered with σ = N/2.
 # σ = 8 and 12 px: misalignments beyond the paper's (issue 32).
-# Misaligned sets (and sequences) are made again when their RGB views were splatted (black
-# disocclusions: sets from before `dear-synth perturb` rendered them); a rendered set's
-# capture.json says so (dear_synth::perturb::RENDERED_VIEW).
-rendered() { grep -q 'rendered from the RGB camera' "$1/capture.json" 2> /dev/null; }
 for sigma in 2 4 6 8 12; do
-    if ! rendered "$data/sigma$sigma"; then
+    if ! current "$data/sigma$sigma"; then
         rm -rf "$data/sigma$sigma"
         target/release/dear-synth perturb --sigma "$((sigma / 2))" --seed 4 --in "$data/aligned" \
             --out "$data/sigma$sigma"
+        made "$data/sigma$sigma"
     fi
 done
 
 # The held-out family (synth/src/family.rs): sensor and scene settings that no training run
 # samples (narrower field of view, fewer electrons, more read noise and ambient light, lower
 # modulation frequency, a wider illuminator offset, more objects); aligned and at σ = 4 px.
-if [ ! -f "$data/heldout/capture.json" ]; then
-    rm -rf "$data/heldout-family"
+if ! current "$data/heldout"; then
+    rm -rf "$data/heldout" "$data/heldout-family"
     target/release/dear-synth family --family heldout --shards 1 --frames-per-shard "$frames" \
         --seed 9002 --width 320 --height 240 --out "$data/heldout-family"
     mv "$data/heldout-family/shard-000" "$data/heldout"
     rm -rf "$data/heldout-family"
+    made "$data/heldout"
 fi
-if ! rendered "$data/heldout-sigma4"; then
+if ! current "$data/heldout-sigma4"; then
     rm -rf "$data/heldout-sigma4"
     target/release/dear-synth perturb --sigma 2 --seed 4 --in "$data/heldout" \
         --out "$data/heldout-sigma4"
+    made "$data/heldout-sigma4"
 fi
 
-if ! rendered "$data/sequence"; then
+if ! current "$data/sequence"; then
     rm -rf "$data/sequence"
     target/release/dear-synth sequence --frames 300 --drift-px 4 --seed 77 --width 320 \
         --height 240 --out "$data/sequence"
+    made "$data/sequence"
 fi
-if [ ! -f "$data/vga_sequence/capture.json" ]; then
+if ! current "$data/vga_sequence"; then
+    rm -rf "$data/vga_sequence"
     target/release/dear-synth sequence --frames 60 --seed 5 --width 640 --height 480 \
         --out "$data/vga_sequence"
+    made "$data/vga_sequence"
 fi
 
 # The shipped bundle first (the figures show the first bundle), then the others for comparison.
@@ -101,12 +117,13 @@ done
 # (bright, single bounce), near-empty rooms, a wide-angle module and a dual-frequency one.
 for spec in clean:9003 empty:9004 wide:9005 dual-low:9006; do
     set=${spec%%:*}
-    if [ ! -f "$data/$set/capture.json" ]; then
-        rm -rf "$data/$set-family"
+    if ! current "$data/$set"; then
+        rm -rf "$data/$set" "$data/$set-family"
         target/release/dear-synth family --family "$set" --shards 1 --frames-per-shard "$frames" \
             --seed "${spec##*:}" --width 320 --height 240 --out "$data/$set-family"
         mv "$data/$set-family/shard-000" "$data/$set"
         rm -rf "$data/$set-family"
+        made "$data/$set"
     fi
     echo "== dear eval on $set"
     target/release/dear eval --capture "$data/$set" --baselines "${bundles[@]}" --figures 0 \
