@@ -28,9 +28,9 @@ mkdir -p "$data" "$out"
 # Every set below is made again unless the simulator's source it was drawn with (synth/'s tree
 # at HEAD and any uncommitted change to it) is the current one, recorded in the set's
 # `.made-by`: a table must never score a set that an older or unfinished simulator drew (the
-# misaligned sets were once kept from a build whose RGB views had c_x's sign reversed,
-# because an earlier check only looked at how the view was made). Rendering is
-# deterministic, so an unchanged simulator makes the same sets.
+# direct fit's tuning sets were once kept from a development build whose RGB views had c_x's
+# sign reversed, and the fit was tuned on them; the check before this one only looked at how
+# a view was made). Rendering is deterministic, so an unchanged simulator makes the same sets.
 synth_stamp=$({
     git rev-parse HEAD:synth
     git diff HEAD -- synth
