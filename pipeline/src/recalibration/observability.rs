@@ -23,7 +23,8 @@
 use dear_capture::calibration::Calibration;
 
 /// ToF pixels per independent sample of the direct fit's edge residual: the edge maps are a
-/// 3×3 Sobel gradient blurred by a Gaussian of σ = 1 px, correlated over about 3×3 px.
+/// 3×3 Sobel gradient (then blurred by `DirectFitParams::blur_sigma`, 0.4 px), correlated over
+/// about 3×3 px by the Sobel kernel alone.
 pub const EDGE_PIXELS_PER_SAMPLE: f64 = 9.0;
 /// RGB pixels per independent sample of a network flow: the rough-flow networks predict at
 /// 1/8 of the resolution and upsample, so an 8×8 block carries about one independent vector.
