@@ -26,16 +26,15 @@ data=${DEAR_DATA:-data}/results
 out=out/results
 frames=${DEAR_RESULTS_FRAMES:-80}
 mkdir -p "$data" "$out"
-# Every set below is made again unless the simulator's source it was drawn with (synth/'s tree
-# at HEAD and any uncommitted change to it) is the current one, recorded in the set's
-# `.made-by`: a table must never score a set that an older or unfinished simulator drew (the
-# direct fit's tuning sets were once kept from a development build whose RGB views had c_x's
-# sign reversed, and the fit was tuned on them; the check before this one only looked at how
-# a view was made). Rendering is deterministic, so an unchanged simulator makes the same sets.
-synth_stamp=$({
-    git rev-parse HEAD:synth
-    git diff HEAD -- synth
-} | sha256sum | cut -c1-16)
+# Every set below is made again unless the simulator's source it was drawn with (every file
+# under synth/, hashed, so uncommitted changes count and no git is needed), recorded in the
+# set's `.made-by`, is the current one: a table must never score a set that an older or
+# unfinished simulator drew (the direct fit's tuning sets were once kept from a development
+# build whose RGB views had c_x's sign reversed, and the fit was tuned on them; the check
+# before this one only looked at how a view was made). Rendering is deterministic, so an
+# unchanged simulator makes the same sets.
+synth_stamp=$(find synth -type f -print0 | LC_ALL=C sort -z | xargs -0 sha256sum | sha256sum |
+    cut -c1-16)
 current() { [ -f "$1/capture.json" ] && [ "$(cat "$1/.made-by" 2> /dev/null)" = "$synth_stamp" ]; }
 made() { echo "$synth_stamp" > "$1/.made-by"; }
 if ! current "$data/aligned"; then
