@@ -9,9 +9,11 @@ use dear_client::{CameraIntrinsics, FrameHeader};
 use dear_synth::geometry::Pose;
 use dear_synth::math::{Mat3, Vec3};
 use dear_synth::scene::{Camera, Object, ObjectKind, Scene};
-use dear_synth::simulate::{simulate, SimConfig};
+use dear_synth::simulate::simulate;
 use dear_synth::texture::Material;
-use dear_synth::transport::RenderOptions;
+
+mod common;
+use common::direct_centre_rays;
 
 #[test]
 fn back_projected_ground_truth_lies_on_the_rendered_plate() {
@@ -34,16 +36,7 @@ fn back_projected_ground_truth_lies_on_the_rendered_plate() {
         pose: Pose::new(rot, centre),
         material: Material::uniform(0.6, 0.6),
     });
-    let config = SimConfig {
-        render: RenderOptions {
-            spp: 1,
-            indirect_spp: 0,
-            max_bounces: 1,
-            jitter: false,
-            ..RenderOptions::default()
-        },
-        ..SimConfig::default()
-    };
+    let config = direct_centre_rays();
     let sample = simulate(&scene, &config, 3, 0);
     let gt = sample.gt_depth.as_slice().unwrap();
 

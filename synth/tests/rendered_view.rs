@@ -8,9 +8,11 @@ use dear_synth::geometry::Pose;
 use dear_synth::math::{Mat3, Vec3};
 use dear_synth::perturb::apply_rendered;
 use dear_synth::scene::{Camera, Object, ObjectKind, PointLight, Scene};
-use dear_synth::simulate::{simulate, SimConfig};
+use dear_synth::simulate::simulate;
 use dear_synth::texture::Material;
-use dear_synth::transport::RenderOptions;
+
+mod common;
+use common::direct_centre_rays;
 
 const PLATE_Z: f64 = 1.5;
 const WALL_Z: f64 = 3.0;
@@ -38,23 +40,10 @@ fn scene() -> Scene {
     scene
 }
 
-fn config() -> SimConfig {
-    SimConfig {
-        render: RenderOptions {
-            spp: 1,
-            indirect_spp: 0,
-            max_bounces: 1,
-            jitter: false,
-            ..RenderOptions::default()
-        },
-        ..SimConfig::default()
-    }
-}
-
 #[test]
 fn every_valid_pixel_of_a_rendered_view_shows_what_the_tof_pixel_of_its_flow_sees() {
     let scene = scene();
-    let cfg = config();
+    let cfg = direct_centre_rays();
     let aligned = simulate(&scene, &cfg, 5, 0).into_capture_sample(0, 0);
     let tof_gt = aligned.truth.depth.clone().unwrap();
     // Plate: 3.0/1.5 + 3 = 5 px across, −2 px down; wall: 3.0/3 + 3 = 4 px, −2 px.
