@@ -273,6 +273,7 @@ class Trainer:
                     loader.sampler.set_epoch(epoch + 1000 * si)
                 self.model.train()
                 total, steps, t0 = 0.0, 0, time.time()
+                cut = False  # this epoch ended early by the budget
                 limit = p.max_steps_per_epoch or len(loader)
                 bar = tqdm(
                     loader,
@@ -286,6 +287,7 @@ class Trainer:
                         break
                     out_of_time = self._budget_spent(stage, stage_start)
                     if out_of_time and steps > 0:
+                        cut = True
                         break
                     b = {k: v.to(self.device, non_blocking=True) for k, v in batch.items()}
                     loss, parts = loss_mod(b)
@@ -298,6 +300,9 @@ class Trainer:
                         loss=f"{float(loss.detach()):.4g}",
                         **{k: f"{v:.3g}" for k, v in parts.items()},
                     )
+                # Spent during the epoch's last step: end the stage here, not after one more
+                # step and validation in an epoch of its own.
+                out_of_time = out_of_time or self._budget_spent(stage, stage_start)
                 sched.step()
                 train_loss = distributed.mean_across_ranks(
                     total / max(steps, 1), self.dist, self.device
@@ -320,7 +325,7 @@ class Trainer:
                     "train_loss": train_loss,
                     "val": val,
                 }
-                if out_of_time:
+                if cut or (out_of_time and epoch + 1 < stage.epochs):
                     entry["stopped"] = "time budget"
                 self.history.append(entry)
                 stage_done = out_of_time or epoch + 1 == stage.epochs
