@@ -855,3 +855,72 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_another_client() {
     assert!(daemon.is_running(), "{}", daemon.log_text());
     a_fresh_client_receives(&s, &service, &mut daemon);
 }
+
+/// `dear watch` whose channel another process corrupts connects again and goes on reporting
+/// frames, instead of exiting (issue 34). Only the watch subscribes, so every `*.connection`
+/// file is one of its channels; the writes go on until it says it is connecting again.
+#[test]
+fn dear_watch_connects_again_after_its_channel_is_corrupted() {
+    let s = setup(clients_group());
+    let service = unique_service("watch-reconnect");
+    let mut daemon = s.daemon(&service, "deard.log");
+    daemon
+        .wait_for_log_line("serving", WAIT)
+        .expect("deard serves");
+    let (out, err) = (s.dir.join("watch.out"), s.dir.join("watch.err"));
+    let mut watch = Command::new(dear_test_support::paths::binary("dear"))
+        .args(["watch", "--json", "--service", &service])
+        .env(dear_proto::IOX2_ROOT_ENV, &s.root)
+        .stdout(std::fs::File::create(&out).unwrap())
+        .stderr(std::fs::File::create(&err).unwrap())
+        .spawn()
+        .unwrap();
+    let frames_per_line = |text: &str| -> Vec<u64> {
+        text.lines()
+            .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+            .map(|v| v["frames"].as_u64().unwrap())
+            .collect()
+    };
+    let read = |p: &PathBuf| std::fs::read_to_string(p).unwrap_or_default();
+    wait_until(
+        "a line with frames",
+        WAIT,
+        || frames_per_line(&read(&out)).iter().any(|&n| n > 0),
+        || read(&err),
+    );
+    let mut scribbler = Scribbler(0x77);
+    let mut writes = 0;
+    while !read(&err).contains("connecting again") {
+        assert!(
+            watch.try_wait().unwrap().is_none(),
+            "dear watch ended after {writes} writes: {}",
+            read(&err)
+        );
+        assert!(writes < 5_000, "no corruption noticed in {writes} writes");
+        for file in s.files(".connection") {
+            scribbler.scribble(&file);
+        }
+        writes += 1;
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let lines_then = frames_per_line(&read(&out)).len();
+    wait_until(
+        "a line with frames after connecting again",
+        WAIT,
+        || {
+            frames_per_line(&read(&out))
+                .iter()
+                .skip(lines_then + 1)
+                .any(|&n| n > 0)
+        },
+        || format!("{}\n{}", read(&err), daemon.log_text()),
+    );
+    assert!(
+        watch.try_wait().unwrap().is_none(),
+        "dear watch ended: {}",
+        read(&err)
+    );
+    watch.kill().unwrap();
+    watch.wait().unwrap();
+    assert!(daemon.is_running(), "{}", daemon.log_text());
+}
