@@ -74,8 +74,16 @@ def bundles(report: dict[str, Report]) -> list[str]:
     return [m[: -len(" aligned")] for m in report if m.endswith(" aligned")]
 
 
+#: The comparison bundle `scripts/results.sh` makes with `dear-gate detach`: the shipped
+#: bundle's refiner without its multi-path gate (the row a learned component must beat).
+WITHOUT_GATE = "-without-gate"
+
+
 def variant_of(report: dict[str, Report], bundle: str) -> str:
     """The refinement variant of a bundle row, from the bundle's model.json."""
+    if bundle.endswith(WITHOUT_GATE):
+        base = variant_of(report, bundle.removesuffix(WITHOUT_GATE))
+        return f"{base} without the multi-path gate"
     manifest = Path("models") / bundle / "model.json"
     if not manifest.is_file():
         return "?"

@@ -1,6 +1,8 @@
-//! `models/edge-guarded` (issue 33): a guarded refiner publishes expected-error codes, and on
-//! clean input — bright, single-bounce scenes, the measurement already right — it does less
-//! harm than the shipped hybrid refiner, which "corrects" multi-path that is not there.
+//! `models/edge-guarded` (issue 33): a guarded refiner publishes an expected-error code exactly
+//! where it publishes depth, and its rows carry a reliability table. (It was made to do less
+//! harm to clean input than the hybrid refiner; the shipped hybrid now carries the multi-path
+//! gate and leaves clean input alone, `multipath_gate.rs`, so that comparison is no longer the
+//! guarded refiner's reason to exist: its expected errors are.)
 
 use std::path::PathBuf;
 
@@ -15,57 +17,30 @@ fn root() -> PathBuf {
 }
 
 #[test]
-fn the_guarded_refiner_does_less_harm_to_clean_depth_and_says_how_wrong_it_expects_to_be() {
+fn the_guarded_refiner_says_how_wrong_it_expects_to_be_wherever_it_publishes_depth() {
     let (w, h) = (160, 120);
     // Seeds no test set uses; three frames of one clean module.
     let params = Family::Clean.draw(4343, 0, 3, w, h);
     let camera = params.camera();
     let guarded = ModelBundle::load(root().join("models/edge-guarded")).unwrap();
-    let hybrid = ModelBundle::load(root().join("models/edge")).unwrap();
-    let mut methods = [
-        BundleMethod::new(&guarded, "guarded", h, w).unwrap(),
-        BundleMethod::new(&hybrid, "hybrid", h, w).unwrap(),
-    ];
+    let mut guarded = BundleMethod::new(&guarded, "guarded", h, w).unwrap();
     let mut eval = Evaluation::new();
     for i in 0..3 {
         let scene = Scene::random(camera, &params.scene, params.seed, i);
         let sample = simulate(&scene, &params.sim, params.seed, i).into_capture_sample(i, 0);
         let valid = ground_truth_mask(&sample).unwrap();
         eval.add("input", &sample, &raw(&sample), valid.view(), None);
-        for m in &mut methods {
-            let out = m.run_refine_only(&sample).unwrap().unwrap();
-            if m.name() == "guarded" {
-                let codes = out
-                    .expected_error_code
-                    .as_ref()
-                    .expect("a guarded refiner's codes");
-                for (z, c) in out.depth.iter().zip(codes) {
-                    assert_eq!(*z > 0.0, *c > 0, "code 0 exactly where there is no depth");
-                }
-            } else {
-                assert!(
-                    out.expected_error_code.is_none(),
-                    "the hybrid has no error maps"
-                );
-            }
-            eval.add(m.name(), &sample, &out, valid.view(), None);
+        let out = guarded.run_refine_only(&sample).unwrap().unwrap();
+        let codes = out
+            .expected_error_code
+            .as_ref()
+            .expect("a guarded refiner's codes");
+        for (z, c) in out.depth.iter().zip(codes) {
+            assert_eq!(*z > 0.0, *c > 0, "code 0 exactly where there is no depth");
         }
+        eval.add("guarded", &sample, &out, valid.view(), None);
     }
     let reports = eval.reports();
-    let mae = |name: &str| {
-        let r = reports.iter().find(|r| r.method == name).unwrap();
-        (r.mae_all_cm.unwrap(), r.mae_cm[0].unwrap())
-    };
-    let (input, guarded, hybrid) = (mae("input"), mae("guarded"), mae("hybrid"));
-    println!(
-        "clean frames, MAE all (low quarter) cm: input {:.2} ({:.2}), guarded {:.2} ({:.2}), \
-         hybrid {:.2} ({:.2})",
-        input.0, input.1, guarded.0, guarded.1, hybrid.0, hybrid.1
-    );
-    assert!(
-        guarded.0 < hybrid.0 && guarded.1 < hybrid.1,
-        "{guarded:?} vs {hybrid:?}"
-    );
     let reliability = &reports
         .iter()
         .find(|r| r.method == "guarded")

@@ -1,0 +1,402 @@
+"""``dear-gate``: train the multi-path gate and put it into a bundle's refine graph (issue 33).
+
+::
+
+    dear-gate train --data DATA/gate-train/shard-* --val DATA/gate-val/shard-* --out runs/gate
+    dear-gate attach --bundle models/edge --gate runs/gate/gate.pt
+    dear-gate score --gate runs/gate/gate.pt --data MY_RECORDING
+    dear-gate detach --bundle models/edge --out edge-without-gate
+
+``train`` fits :class:`~dear_train.models.multipath_gate.MultipathGate` to tell frames with
+multi-path from frames without, on rendered family shards (``dear-synth family``): the label
+of a shard is whether its simulation rendered indirect light (``max_bounces > 1`` in its
+``capture.json``). ``attach`` appends the gate to the bundle's hybrid refine graph
+(:func:`compose`), checks the result against onnxruntime and PyTorch, and records the gate in
+``model.json``; the refiner's own weights are not touched.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import onnx
+import torch
+import torch.nn.functional as F
+
+from dear_train.data.capture import Capture, CaptureError
+from dear_train.data.dataset import normalize_amplitude
+from dear_train.export import CHECK_ATOL, OPSET, sha256
+from dear_train.models import param_count
+from dear_train.models.multipath_gate import (
+    GRID,
+    GateOnMaps,
+    MultipathGate,
+    pool_inputs,
+)
+
+#: Prefix of the gate's tensor names inside the composed refine graph.
+PREFIX = "multipath_gate/"
+#: What `attach` adds to the refine output's meaning in `model.json`.
+MEANING_SUFFIX = (
+    "; bias, gate and trust already scaled by the frame's multi-path probability "
+    "(model.json multipath_gate)"
+)
+
+
+def shard_label(root: Path) -> float:
+    """1 when the capture's simulation rendered indirect light (multi-path), else 0."""
+    path = root / "capture.json"
+    doc = json.loads(path.read_text())
+    try:
+        bounces = doc["source"]["details"]["params"]["sim"]["render"]["max_bounces"]
+    except (KeyError, TypeError) as e:
+        raise CaptureError(
+            f"{path}: no source.details.params.sim.render.max_bounces: the gate trains on "
+            "captures rendered by `dear-synth family` or `generate`, whose label it is"
+        ) from e
+    if not isinstance(bounces, int) or bounces < 1:
+        raise CaptureError(f"{path}: max_bounces {bounces!r} is not a positive integer")
+    return 1.0 if bounces > 1 else 0.0
+
+
+def frame_inputs(capture: Capture, index: int) -> torch.Tensor:
+    """Frame ``index`` as the refine graph gets it (aligned), on the gate's grid ``(2, 60, 80)``."""
+    frame = capture.load(index)
+    depth = frame.depth.copy()
+    if frame.mask is not None:
+        depth[~frame.mask] = 0.0
+    amplitude = normalize_amplitude(frame.amplitude, depth, 99.0)
+    t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))[None, None]  # noqa: E731
+    return pool_inputs(t(amplitude), t(depth))[0]
+
+
+def load_grids(roots: list[Path]) -> tuple[torch.Tensor, torch.Tensor]:
+    """Every frame of ``roots`` on the gate's grid, and its label."""
+    grids, labels = [], []
+    for root in roots:
+        label = shard_label(root)
+        capture = Capture(root)
+        for i in range(len(capture)):
+            grids.append(frame_inputs(capture, i))
+            labels.append(label)
+    if not grids:
+        raise ValueError(f"no frames in {', '.join(map(str, roots))}")
+    return torch.stack(grids), torch.tensor(labels)
+
+
+def accuracy(gate: MultipathGate, grids: torch.Tensor, labels: torch.Tensor) -> float:
+    gate.eval()
+    with torch.no_grad():
+        batches = [grids[i : i + 64] for i in range(0, len(grids), 64)]
+        p = torch.cat([torch.sigmoid(gate.logit(b)) for b in batches])
+    gate.train()
+    return float(((p > 0.5).float() == labels).float().mean())
+
+
+def train(args: argparse.Namespace) -> None:
+    torch.manual_seed(args.seed)
+    rng = np.random.default_rng(args.seed)
+    t0 = time.time()
+    grids, labels = load_grids(args.data)
+    val = load_grids(args.val) if args.val else None
+    n_val = 0 if val is None else len(val[0])
+    print(
+        f"dear-gate: {len(grids)} training frames ({labels.mean():.0%} with multi-path), "
+        f"{n_val} validation frames, loaded in {time.time() - t0:.0f} s",
+        flush=True,
+    )
+    gate = MultipathGate(width=args.width)
+    opt = torch.optim.Adam(gate.parameters(), args.lr)
+    steps = args.epochs * ((len(grids) + args.batch - 1) // args.batch)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, args.lr, total_steps=steps)
+    history = []
+    for epoch in range(args.epochs):
+        t0 = time.time()
+        order = rng.permutation(len(grids))
+        total = 0.0
+        for i in range(0, len(order), args.batch):
+            idx = torch.from_numpy(order[i : i + args.batch])
+            x = grids[idx]
+            # Mirror images have the same multi-path.
+            if rng.random() < 0.5:
+                x = x.flip(-1)
+            loss = F.binary_cross_entropy_with_logits(gate.logit(x), labels[idx])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += loss.item() * len(idx)
+        record = {"epoch": epoch, "loss": total / len(grids), "seconds": time.time() - t0}
+        if val is not None:
+            record["val_accuracy"] = accuracy(gate, *val)
+        history.append(record)
+        print("dear-gate: " + json.dumps(record), flush=True)
+    args.out.mkdir(parents=True, exist_ok=True)
+    torch.save(
+        {
+            "width": args.width,
+            "state": gate.state_dict(),
+            "recipe": {
+                "data": captures_summary(args.data),
+                "val": captures_summary(args.val or []),
+                "frames": len(grids),
+                "multipath_fraction": float(labels.mean()),
+                "epochs": args.epochs,
+                "batch": args.batch,
+                "lr": args.lr,
+                "seed": args.seed,
+            },
+            "history": history,
+        },
+        args.out / "gate.pt",
+    )
+    print(f"dear-gate: wrote {args.out / 'gate.pt'}")
+
+
+def captures_summary(roots: list[Path]) -> dict:
+    """How many captures, from which directories (their names, not the machine's paths)."""
+    return {"captures": len(roots), "directories": sorted({p.parent.name for p in roots})}
+
+
+def load_gate(path: Path) -> tuple[MultipathGate, dict]:
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no gate checkpoint there (`dear-gate train` writes one)")
+    ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    gate = MultipathGate(width=ckpt["width"])
+    gate.load_state_dict(ckpt["state"])
+    return gate.eval(), ckpt
+
+
+def compose(refine: onnx.ModelProto, gate_graph: onnx.ModelProto) -> onnx.ModelProto:
+    """``refine`` followed by ``gate_graph`` (inputs ``amplitude, depth, maps``; one output):
+    the refine graph's output feeds the gate's ``maps``, the two share the other inputs, and
+    the composed graph keeps the refine graph's inputs and output name. Every other tensor of
+    the gate is renamed under :data:`PREFIX`."""
+    (out,) = refine.graph.output
+    ungated = PREFIX + "ungated_maps"
+    for node in refine.graph.node:
+        node.output[:] = [ungated if o == out.name else o for o in node.output]
+    shared = {"amplitude", "depth"}
+    gate_in = [i.name for i in gate_graph.graph.input]
+    if gate_in != ["amplitude", "depth", "maps"]:
+        raise ValueError(f"gate graph inputs {gate_in}: want amplitude, depth, maps")
+    (gate_out,) = gate_graph.graph.output
+
+    def rename(name: str) -> str:
+        if name in shared or name == "":
+            return name
+        if name == gate_in[2]:
+            return ungated
+        if name == gate_out.name:
+            return out.name
+        return PREFIX + name
+
+    for init in gate_graph.graph.initializer:
+        init.name = rename(init.name)
+        refine.graph.initializer.append(init)
+    for node in gate_graph.graph.node:
+        node.name = PREFIX + node.name
+        node.input[:] = [rename(i) for i in node.input]
+        node.output[:] = [rename(o) for o in node.output]
+        refine.graph.node.append(node)
+    onnx.checker.check_model(refine)
+    return refine
+
+
+def export_gate_graph(gate: MultipathGate, channels: int, path: Path) -> None:
+    """:class:`GateOnMaps` as an ONNX graph (opset as every bundle graph, dynamic N/H/W)."""
+    module = GateOnMaps(gate).eval()
+    h, w = 96, 128
+    inputs = (
+        torch.rand(1, 1, h, w),
+        torch.rand(1, 1, h, w) * 4,
+        torch.randn(1, channels, h // 4, w // 4),
+    )
+    names = ["amplitude", "depth", "maps"]
+    dyn = {n: {0: "N", 2: "H", 3: "W"} for n in names}
+    dyn["maps"] = {0: "N", 2: "h", 3: "w"}
+    dyn["gated_maps"] = {0: "N", 2: "h", 3: "w"}
+    with torch.no_grad():
+        torch.onnx.export(
+            module,
+            inputs,
+            str(path),
+            input_names=names,
+            output_names=["gated_maps"],
+            dynamic_axes=dyn,
+            opset_version=OPSET,
+            do_constant_folding=True,
+            dynamo=False,
+        )
+
+
+def check_composed(
+    original: Path, composed: Path, gate: MultipathGate, sizes: list[tuple[int, int]]
+) -> float:
+    """Max |composed − (original maps gated in PyTorch)| over random inputs at ``sizes``."""
+    import onnxruntime as ort
+
+    before = ort.InferenceSession(str(original), providers=["CPUExecutionProvider"])
+    after = ort.InferenceSession(str(composed), providers=["CPUExecutionProvider"])
+    names = [i.name for i in before.get_inputs()]
+    worst = 0.0
+    rng = np.random.default_rng(0)
+    for h, w in sizes:
+        shapes = {"amplitude": 1, "depth": 1, "rgb": 3, "classical": 1}
+        feed = {n: rng.random((1, shapes[n], h, w), dtype=np.float32) for n in names}
+        feed["depth"] *= 4
+        if "classical" in feed:
+            feed["classical"] = feed["depth"] + 0.01 * rng.standard_normal((1, 1, h, w)).astype(
+                np.float32
+            )
+        (maps,) = before.run(None, feed)
+        (got,) = after.run(None, feed)
+        with torch.no_grad():
+            want = GateOnMaps(gate)(
+                *(torch.from_numpy(feed[n]) for n in ("amplitude", "depth")),
+                torch.from_numpy(maps),
+            ).numpy()
+        worst = max(worst, float(np.abs(got - want).max()))
+    if not worst <= CHECK_ATOL:
+        raise RuntimeError(f"{composed}: differs from the gated maps by {worst:.3g} > {CHECK_ATOL}")
+    return worst
+
+
+def attach(args: argparse.Namespace) -> None:
+    bundle: Path = args.bundle
+    manifest_path = bundle / "model.json"
+    manifest = json.loads(manifest_path.read_text())
+    entry = manifest["graphs"]["refine"]
+    apply = entry.get("apply", {})
+    if apply.get("kind") != "hybrid-kernel":
+        raise ValueError(
+            f"{manifest_path}: refine apply kind {apply.get('kind')!r}: the gate scales the bias "
+            "map of a hybrid refiner (hybrid-kernel)"
+        )
+    if "multipath_gate" in manifest:
+        raise ValueError(f"{manifest_path}: the refine graph already has a multi-path gate")
+    gate, ckpt = load_gate(args.gate)
+    path = bundle / entry["file"]
+    with tempfile.TemporaryDirectory() as tmp:
+        original = Path(tmp) / "refine-ungated.onnx"
+        original.write_bytes(path.read_bytes())
+        gate_path = Path(tmp) / "gate-on-maps.onnx"
+        export_gate_graph(gate, apply["channels"], gate_path)
+        composed = compose(onnx.load(str(path)), onnx.load(str(gate_path)))
+        onnx.save(composed, str(path))
+        try:
+            diff = check_composed(original, path, gate, [(96, 128), (64, 80), (240, 320)])
+        except Exception:
+            # Never leave a bundle whose graph and manifest disagree.
+            path.write_bytes(original.read_bytes())
+            raise
+    entry["params"] = int(entry["params"]) + param_count(gate)
+    entry["bytes"] = path.stat().st_size
+    entry["sha256"] = sha256(path)
+    entry.setdefault("check", {})["gate_max_abs_diff"] = diff
+    entry["outputs"][0]["meaning"] += MEANING_SUFFIX
+    history = ckpt.get("history", [])
+    manifest["multipath_gate"] = {
+        "what": "a frame-level CNN (train/dear_train/models/multipath_gate.py) inside refine.onnx: "
+        f"the refine inputs averaged onto a {GRID[0]}x{GRID[1]} grid give p, the probability "
+        "that the frame has multi-path; the maps are then scaled by p: tanh(maps[9]) and "
+        "sigmoid(maps[10]) become p times themselves, maps[12] becomes maps[12] + log(p) "
+        "(gate_maps in that file)",
+        "params": param_count(gate),
+        "recipe": ckpt.get("recipe", {}),
+        "last_epoch": history[-1] if history else None,
+    }
+    manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
+    print(f"dear-gate: {path} gated ({param_count(gate)} parameters, max |diff| {diff:.2g})")
+
+
+def detach(args: argparse.Namespace) -> None:
+    """A copy of ``--bundle`` at ``--out`` whose refine graph is the refiner alone (the gate's
+    nodes removed, its manifest record dropped): the row *without* the gate in
+    ``scripts/results.sh``. The refiner's nodes and weights are the attached graph's own."""
+    src: Path = args.bundle
+    manifest = json.loads((src / "model.json").read_text())
+    record = manifest.pop("multipath_gate", None)
+    if record is None:
+        raise ValueError(f"{src / 'model.json'}: the refine graph has no multi-path gate")
+    if args.out.exists():
+        raise FileExistsError(f"{args.out}: exists; detach writes a new bundle directory")
+    shutil.copytree(src, args.out)
+    entry = manifest["graphs"]["refine"]
+    path = args.out / entry["file"]
+    model = onnx.load(str(path))
+    (out,) = model.graph.output
+    ungated = PREFIX + "ungated_maps"
+    kept = [n for n in model.graph.node if not n.name.startswith(PREFIX)]
+    for node in kept:
+        node.output[:] = [out.name if o == ungated else o for o in node.output]
+    del model.graph.node[:]
+    model.graph.node.extend(kept)
+    inits = [i for i in model.graph.initializer if not i.name.startswith(PREFIX)]
+    del model.graph.initializer[:]
+    model.graph.initializer.extend(inits)
+    onnx.checker.check_model(model)
+    onnx.save(model, str(path))
+    entry["params"] = int(entry["params"]) - int(record["params"])
+    entry["bytes"] = path.stat().st_size
+    entry["sha256"] = sha256(path)
+    entry.get("check", {}).pop("gate_max_abs_diff", None)
+    entry["outputs"][0]["meaning"] = entry["outputs"][0]["meaning"].removesuffix(MEANING_SUFFIX)
+    (args.out / "model.json").write_text(json.dumps(manifest, indent=2) + "\n")
+    print(f"dear-gate: {args.out}: {src}'s refiner without its multi-path gate")
+
+
+def score(args: argparse.Namespace) -> None:
+    """Per capture: the gate's mean ``p`` and the range of its frames, beside the label when
+    the capture records one (how a user checks the gate on their own recordings)."""
+    gate, _ = load_gate(args.gate)
+    for root in args.data:
+        capture = Capture(root)
+        grids = torch.stack([frame_inputs(capture, i) for i in range(len(capture))])
+        with torch.no_grad():
+            p = torch.sigmoid(gate.logit(grids))
+        try:
+            label = f"multi-path {'yes' if shard_label(root) else 'no'}"
+        except CaptureError:
+            label = "multi-path unknown"
+        print(
+            f"{root}: {len(p)} frames, p mean {p.mean():.3f}, min {p.min():.3f}, "
+            f"max {p.max():.3f} ({label})"
+        )
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="dear-gate", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    t = sub.add_parser("train", help="train the gate on rendered family shards")
+    t.add_argument("--data", type=Path, nargs="+", required=True, help="training captures")
+    t.add_argument("--val", type=Path, nargs="*", help="validation captures (other seeds)")
+    t.add_argument("--out", type=Path, required=True, help="run directory (gate.pt)")
+    t.add_argument("--epochs", type=int, default=20)
+    t.add_argument("--batch", type=int, default=32)
+    t.add_argument("--lr", type=float, default=1e-3)
+    t.add_argument("--width", type=int, default=16)
+    t.add_argument("--seed", type=int, default=0)
+    a = sub.add_parser("attach", help="append a trained gate to a bundle's refine graph")
+    a.add_argument("--bundle", type=Path, required=True, help="bundle directory (edited)")
+    a.add_argument("--gate", type=Path, required=True, help="gate.pt from `dear-gate train`")
+    d = sub.add_parser("detach", help="copy a bundle with the gate taken out (for comparison)")
+    d.add_argument("--bundle", type=Path, required=True, help="bundle with a gate")
+    d.add_argument("--out", type=Path, required=True, help="new bundle directory")
+    c = sub.add_parser("score", help="the gate's p on captures (e.g. your own recordings)")
+    c.add_argument("--gate", type=Path, required=True, help="gate.pt from `dear-gate train`")
+    c.add_argument("--data", type=Path, nargs="+", required=True, help="captures")
+    args = parser.parse_args(argv)
+    torch.set_num_threads(max(1, torch.get_num_threads()))
+    commands = {"train": train, "attach": attach, "detach": detach, "score": score}
+    commands[args.command](args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,175 @@
+"""The multi-path gate (issue 33): its scaling of the hybrid maps, its composition into a
+bundle's refine graph, its labels and a training run."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+import pytest
+import torch
+
+from dear_train import gate as cli
+from dear_train.data.capture import CaptureError
+from dear_train.data.synthetic import write_synthetic_capture
+from dear_train.export import export_bundle
+from dear_train.models.multipath_gate import (
+    BIAS_CHANNEL,
+    EPS,
+    GATE_CHANNEL,
+    TRUST_CHANNEL,
+    MultipathGate,
+    gate_maps,
+)
+from dear_train.training.checkpoint import build_model
+from dear_train.training.config import get_profile
+
+
+def test_an_open_gate_keeps_the_maps_and_a_closed_one_stops_the_correction() -> None:
+    maps = torch.randn(2, 13, 6, 8) * 2
+    opened = gate_maps(maps, torch.ones(2, 1, 1, 1))
+    # What the daemon's tail computes from the maps is unchanged (the logits themselves are
+    # not, where tanh saturates in float32).
+    for channel, f in ((BIAS_CHANNEL, torch.tanh), (GATE_CHANNEL, torch.sigmoid)):
+        assert torch.allclose(f(opened[:, channel]), f(maps[:, channel]), atol=2e-6)
+    assert torch.equal(opened[:, TRUST_CHANNEL], maps[:, TRUST_CHANNEL])
+    closed = gate_maps(maps, torch.zeros(2, 1, 1, 1))
+    # No bias, no smoothing, and the classical estimate only where it finds a jump.
+    assert torch.tanh(closed[:, BIAS_CHANNEL]).abs().max() <= 2 * EPS
+    assert torch.sigmoid(closed[:, GATE_CHANNEL]).max() <= 2 * EPS
+    shift = closed[:, TRUST_CHANNEL] - maps[:, TRUST_CHANNEL]
+    assert torch.allclose(shift, torch.full_like(shift, float(np.log(EPS))), atol=1e-4)
+    untouched = [c for c in range(13) if c not in (BIAS_CHANNEL, GATE_CHANNEL, TRUST_CHANNEL)]
+    assert torch.equal(closed[:, untouched], maps[:, untouched])
+    # In between: the bias and the smoothing scale with p.
+    half = gate_maps(maps, torch.full((2, 1, 1, 1), 0.5))
+    assert torch.allclose(
+        torch.tanh(half[:, BIAS_CHANNEL]), 0.5 * torch.tanh(maps[:, BIAS_CHANNEL]), atol=1e-5
+    )
+    assert torch.allclose(
+        torch.sigmoid(half[:, GATE_CHANNEL]), 0.5 * torch.sigmoid(maps[:, GATE_CHANNEL]), atol=1e-5
+    )
+
+
+def hybrid_bundle(tmp_path: Path, variant: str = "hybrid") -> Path:
+    profile = get_profile("smoke", variant=variant)
+    out = tmp_path / "bundle"
+    export_bundle(build_model(profile).eval(), profile, out, macs_at=None)
+    return out
+
+
+def saved_gate(tmp_path: Path) -> tuple[Path, MultipathGate]:
+    torch.manual_seed(1)
+    gate = MultipathGate(width=8)
+    # Not the identity: random batch-norm statistics, so that p differs between frames.
+    for m in gate.modules():
+        if isinstance(m, torch.nn.BatchNorm2d):
+            m.running_mean.uniform_(-0.5, 0.5)
+            m.running_var.uniform_(0.5, 2.0)
+    path = tmp_path / "run" / "gate.pt"
+    path.parent.mkdir()
+    torch.save({"width": 8, "state": gate.state_dict(), "history": []}, path)
+    return path, gate.eval()
+
+
+def test_attach_puts_the_gate_into_the_refine_graph(tmp_path: Path) -> None:
+    bundle = hybrid_bundle(tmp_path)
+    before = json.loads((bundle / "model.json").read_text())
+    original = tmp_path / "refine-before.onnx"
+    shutil.copy(bundle / "refine.onnx", original)
+    path, gate = saved_gate(tmp_path)
+    cli.main(["attach", "--bundle", str(bundle), "--gate", str(path)])
+    after = json.loads((bundle / "model.json").read_text())
+    entry = after["graphs"]["refine"]
+    assert entry["sha256"] == cli.sha256(bundle / "refine.onnx")
+    assert entry["sha256"] != before["graphs"]["refine"]["sha256"]
+    assert entry["inputs"] == before["graphs"]["refine"]["inputs"]
+    assert after["multipath_gate"]["params"] == sum(p.numel() for p in gate.parameters())
+    assert after["graphs"]["flow"] == before["graphs"]["flow"]
+    # The composed graph: the same inputs and output names, the maps gated by the frame's p.
+    rng = np.random.default_rng(5)
+    feed = {
+        "amplitude": rng.random((1, 1, 64, 96), dtype=np.float32),
+        "depth": (1 + 3 * rng.random((1, 1, 64, 96))).astype(np.float32),
+        "rgb": rng.random((1, 3, 64, 96), dtype=np.float32),
+    }
+    feed["classical"] = feed["depth"] + np.float32(0.01)
+    run = lambda p: ort.InferenceSession(str(p), providers=["CPUExecutionProvider"])  # noqa: E731
+    composed = run(bundle / "refine.onnx")
+    assert [o.name for o in composed.get_outputs()] == [
+        o["name"] for o in before["graphs"]["refine"]["outputs"]
+    ]
+    (maps,) = run(original).run(None, feed)
+    (got,) = composed.run(None, feed)
+    with torch.no_grad():
+        p = gate(torch.from_numpy(feed["amplitude"]), torch.from_numpy(feed["depth"]))
+        want = gate_maps(torch.from_numpy(maps), p).numpy()
+    assert 0.0 < float(p) < 1.0
+    assert np.abs(got - want).max() < 1e-4
+    assert np.abs(got - maps).max() > 1e-3, "the gate changed nothing"
+    with pytest.raises(ValueError, match="already has a multi-path gate"):
+        cli.main(["attach", "--bundle", str(bundle), "--gate", str(path)])
+    # Taken out again: the refiner's own maps, bit for bit, and the manifest says so.
+    without = tmp_path / "without"
+    cli.main(["detach", "--bundle", str(bundle), "--out", str(without)])
+    (back,) = run(without / "refine.onnx").run(None, feed)
+    assert np.array_equal(back, maps)
+    detached = json.loads((without / "model.json").read_text())
+    assert "multipath_gate" not in detached
+    assert detached["graphs"]["refine"]["params"] == before["graphs"]["refine"]["params"]
+    assert detached["graphs"]["refine"]["outputs"] == before["graphs"]["refine"]["outputs"]
+    assert detached["graphs"]["refine"]["sha256"] == cli.sha256(without / "refine.onnx")
+    with pytest.raises(ValueError, match="no multi-path gate"):
+        cli.main(["detach", "--bundle", str(without), "--out", str(tmp_path / "again")])
+
+
+def test_attach_refuses_a_refiner_without_a_bias_map(tmp_path: Path) -> None:
+    bundle = hybrid_bundle(tmp_path, variant="kpn")
+    path, _ = saved_gate(tmp_path)
+    with pytest.raises(ValueError, match="hybrid"):
+        cli.main(["attach", "--bundle", str(bundle), "--gate", str(path)])
+
+
+def labelled_capture(root: Path, bounces: int | None, seed: int) -> Path:
+    write_synthetic_capture(root, frames=4, seed=seed)
+    path = root / "capture.json"
+    doc = json.loads(path.read_text())
+    if bounces is not None:
+        doc["source"]["details"] = {"params": {"sim": {"render": {"max_bounces": bounces}}}}
+    path.write_text(json.dumps(doc))
+    return root
+
+
+def test_labels_come_from_the_simulation_and_a_capture_without_one_is_named(
+    tmp_path: Path,
+) -> None:
+    assert cli.shard_label(labelled_capture(tmp_path / "a", 3, 1)) == 1.0
+    assert cli.shard_label(labelled_capture(tmp_path / "b", 1, 2)) == 0.0
+    unknown = labelled_capture(tmp_path / "c", None, 3)
+    with pytest.raises(CaptureError, match=str(unknown / "capture.json")):
+        cli.shard_label(unknown)
+
+
+def test_training_writes_a_gate_that_attach_and_score_take(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = [
+        labelled_capture(tmp_path / "mpi", 3, 1),
+        labelled_capture(tmp_path / "clean", 1, 2),
+    ]
+    out = tmp_path / "run"
+    train = ["train", "--data", *map(str, data), "--val", str(data[0]), "--out", str(out)]
+    cli.main([*train, "--epochs", "2", "--batch", "4", "--width", "8"])
+    ckpt = torch.load(out / "gate.pt", weights_only=True)
+    assert len(ckpt["history"]) == 2 and "val_accuracy" in ckpt["history"][0]
+    assert ckpt["recipe"]["data"] == {"captures": 2, "directories": [tmp_path.name]}
+    cli.main(["score", "--gate", str(out / "gate.pt"), "--data", str(data[1])])
+    assert "4 frames" in capsys.readouterr().out
+    bundle = hybrid_bundle(tmp_path)
+    cli.main(["attach", "--bundle", str(bundle), "--gate", str(out / "gate.pt")])
+    assert (
+        json.loads((bundle / "model.json").read_text())["multipath_gate"]["recipe"]["epochs"] == 2
+    )
