@@ -306,7 +306,7 @@ def attach(args: argparse.Namespace) -> None:
         "what": "a frame-level CNN (train/dear_train/models/multipath_gate.py) inside refine.onnx: "
         f"the refine inputs averaged onto a {GRID[0]}x{GRID[1]} grid give p, the probability "
         "that the frame has multi-path; the maps are then scaled by p: tanh(maps[9]) and "
-        "sigmoid(maps[10]) become p times themselves, maps[12] becomes maps[12] + log(p) "
+        "sigmoid(maps[10]) become p times themselves, maps[12] becomes maps[12] + 2 log(p) "
         "(gate_maps in that file)",
         "params": param_count(gate),
         "recipe": ckpt.get("recipe", {}),

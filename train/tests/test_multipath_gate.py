@@ -41,7 +41,7 @@ def test_an_open_gate_keeps_the_maps_and_a_closed_one_stops_the_correction() -> 
     assert torch.tanh(closed[:, BIAS_CHANNEL]).abs().max() <= 2 * EPS
     assert torch.sigmoid(closed[:, GATE_CHANNEL]).max() <= 2 * EPS
     shift = closed[:, TRUST_CHANNEL] - maps[:, TRUST_CHANNEL]
-    assert torch.allclose(shift, torch.full_like(shift, float(np.log(EPS))), atol=1e-4)
+    assert torch.allclose(shift, torch.full_like(shift, 2 * float(np.log(EPS))), atol=1e-4)
     untouched = [c for c in range(13) if c not in (BIAS_CHANNEL, GATE_CHANNEL, TRUST_CHANNEL)]
     assert torch.equal(closed[:, untouched], maps[:, untouched])
     # In between: the bias and the smoothing scale with p.
