@@ -87,14 +87,14 @@ def test_headline_rows_come_from_eval_json_and_say_when_missing(
             {**mae("static+classical-filter", 1.89), "aepe_px": 0.0},
             {**mae("edge aligned", 2.0), "aepe_px": 1.0864},
             {**mae("edge", 2.0), "aepe_px": 1.0864},
-            {**mae("edge-guarded aligned", 2.0), "aepe_px": 1.0864},
-            mae("edge refine @ true calibration", 5.641),
-            mae("edge-guarded refine @ true calibration", 3.0649),
+            {**mae("edge-without-gate aligned", 2.0), "aepe_px": 1.0864},
+            mae("edge refine @ true calibration", 1.641),
+            mae("edge-without-gate refine @ true calibration", 5.6649),
         ],
     )
     rows = results.headline_table(tmp_path)
-    clean = next(r for r in rows if r.startswith("| Known limit"))
-    assert "input 1.99 cm, `edge` 5.64, `edge-guarded` 3.06" in clean
+    clean = next(r for r in rows if r.startswith("| Clean input"))
+    assert "input 1.99 cm, `edge` 1.64, without its multi-path gate 5.66" in clean
     families = rows[-1]
     assert "`clean` 1.09" in families and "`aligned` –" in families and "`wide` –" in families
     # The same figures as RESULTS.md's family tables print them.
