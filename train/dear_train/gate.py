@@ -395,7 +395,11 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     torch.set_num_threads(max(1, torch.get_num_threads()))
     commands = {"train": train, "attach": attach, "detach": detach, "score": score}
-    commands[args.command](args)
+    try:
+        commands[args.command](args)
+    except (CaptureError, ValueError, OSError) as e:
+        # A bad input (a capture, a bundle, a path): its message names it; no traceback.
+        parser.exit(2, f"dear-gate: error: {e}\n")
 
 
 if __name__ == "__main__":

@@ -54,9 +54,19 @@ def test_an_open_gate_keeps_the_maps_and_a_closed_one_stops_the_correction() -> 
     )
 
 
+def fails(capsys: pytest.CaptureFixture[str], argv: list[str], message: str) -> None:
+    """`dear-gate argv` exits with status 2 and an error naming `message`, no traceback."""
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(argv)
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("dear-gate: error: ") and message in err, err
+
+
 def hybrid_bundle(tmp_path: Path, variant: str = "hybrid") -> Path:
     profile = get_profile("smoke", variant=variant)
-    out = tmp_path / "bundle"
+    out = tmp_path / f"bundle-{variant}"
     export_bundle(build_model(profile).eval(), profile, out, macs_at=None)
     return out
 
@@ -75,7 +85,9 @@ def saved_gate(tmp_path: Path) -> tuple[Path, MultipathGate]:
     return path, gate.eval()
 
 
-def test_attach_puts_the_gate_into_the_refine_graph(tmp_path: Path) -> None:
+def test_attach_puts_the_gate_into_the_refine_graph(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     bundle = hybrid_bundle(tmp_path)
     before = json.loads((bundle / "model.json").read_text())
     original = tmp_path / "refine-before.onnx"
@@ -110,8 +122,11 @@ def test_attach_puts_the_gate_into_the_refine_graph(tmp_path: Path) -> None:
     assert 0.0 < float(p) < 1.0
     assert np.abs(got - want).max() < 1e-4
     assert np.abs(got - maps).max() > 1e-3, "the gate changed nothing"
-    with pytest.raises(ValueError, match="already has a multi-path gate"):
-        cli.main(["attach", "--bundle", str(bundle), "--gate", str(path)])
+    fails(
+        capsys,
+        ["attach", "--bundle", str(bundle), "--gate", str(path)],
+        "already has a multi-path gate",
+    )
     # Taken out again: the refiner's own maps, bit for bit, and the manifest says so.
     without = tmp_path / "without"
     cli.main(["detach", "--bundle", str(bundle), "--out", str(without)])
@@ -122,15 +137,22 @@ def test_attach_puts_the_gate_into_the_refine_graph(tmp_path: Path) -> None:
     assert detached["graphs"]["refine"]["params"] == before["graphs"]["refine"]["params"]
     assert detached["graphs"]["refine"]["outputs"] == before["graphs"]["refine"]["outputs"]
     assert detached["graphs"]["refine"]["sha256"] == cli.sha256(without / "refine.onnx")
-    with pytest.raises(ValueError, match="no multi-path gate"):
-        cli.main(["detach", "--bundle", str(without), "--out", str(tmp_path / "again")])
+    fails(
+        capsys,
+        ["detach", "--bundle", str(without), "--out", str(tmp_path / "again")],
+        "no multi-path gate",
+    )
 
 
-def test_attach_refuses_a_refiner_without_a_bias_map(tmp_path: Path) -> None:
+def test_attach_refuses_a_refiner_without_a_bias_map(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     bundle = hybrid_bundle(tmp_path, variant="kpn")
     path, _ = saved_gate(tmp_path)
-    with pytest.raises(ValueError, match="hybrid"):
-        cli.main(["attach", "--bundle", str(bundle), "--gate", str(path)])
+    fails(capsys, ["attach", "--bundle", str(bundle), "--gate", str(path)], "hybrid")
+    hybrid = hybrid_bundle(tmp_path)
+    missing = str(tmp_path / "none.pt")
+    fails(capsys, ["attach", "--bundle", str(hybrid), "--gate", missing], "none.pt")
 
 
 def labelled_capture(root: Path, bounces: int | None, seed: int) -> Path:
