@@ -19,9 +19,10 @@ use anyhow::{bail, Context};
 use clap::Args;
 use dear_capture::{layout::MANIFEST_FILE, CaptureManifest, CaptureWriter, Intrinsics, RgbdFrame};
 use dear_client::save::{auto_depth_range, save_depth_colorized, save_rgb_depth_blend};
-use dear_client::{Client, Frame};
+use dear_client::Frame;
 use serde_json::{json, Value};
 
+use super::reconnect::ReconnectingClient;
 use super::stats::flag_names;
 use super::{first_frame, next_frame, parse_intrinsics, Interrupted, StopFlag};
 
@@ -73,17 +74,17 @@ fn parse_timeout(s: &str) -> Result<f64, String> {
 pub fn run(args: &DumpArgs) -> anyhow::Result<()> {
     check_out_dir(&args.out)?;
     let stop = StopFlag::install()?;
-    let client = Client::connect(&args.service)?;
+    let mut client = ReconnectingClient::connect(&args.service)?;
     let timeout = Duration::from_secs_f64(args.timeout_s);
 
-    let first = first_frame(&client, &args.service, args.timeout_s, &args.out, &stop)?;
+    let first = first_frame(&mut client, &args.service, args.timeout_s, &args.out, &stop)?;
     let mut dump = Dump::create(args, &first)?;
     let progress = indicatif::ProgressBar::new(args.count);
     dump.add(first)?;
     progress.inc(1);
     let mut outcome = Ok(());
     while dump.len() < args.count {
-        match next_frame(&client, timeout, None, &stop) {
+        match next_frame(&mut client, timeout, None, &stop) {
             Ok(Some(frame)) => {
                 if let Err(e) = dump.add(frame) {
                     outcome = Err(e);

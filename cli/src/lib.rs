@@ -10,6 +10,7 @@ pub mod devices;
 pub mod dump;
 pub mod eval;
 pub mod list;
+pub mod reconnect;
 pub mod record;
 pub mod stats;
 pub mod view;
@@ -151,7 +152,7 @@ const POLL: std::time::Duration = std::time::Duration::from_millis(100);
 /// Waits for the next good frame (`dump` and `record`); malformed ones are skipped with a
 /// warning. `Ok(None)` on timeout, at `end_at`, or when `stop` was set.
 pub fn next_frame(
-    client: &dear_client::Client,
+    client: &mut reconnect::ReconnectingClient,
     timeout: std::time::Duration,
     end_at: Option<std::time::Instant>,
     stop: &StopFlag,
@@ -195,7 +196,7 @@ pub fn warn_untrusted_once(e: &dear_client::ReceiveError) {
 /// Waits for the first frame of a command that writes `out` (`dump`, `record`). When none comes,
 /// the error says whether Ctrl-C or the timeout ended the wait, and that nothing was written.
 pub fn first_frame(
-    client: &dear_client::Client,
+    client: &mut reconnect::ReconnectingClient,
     service: &str,
     timeout_s: f64,
     out: &std::path::Path,

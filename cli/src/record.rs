@@ -42,9 +42,10 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context};
 use clap::Args;
 use dear_capture::Intrinsics;
-use dear_client::{Client, Frame};
+use dear_client::Frame;
 
 use self::mcap_file::{DepthEncoding, FrameData, RecordSummary, Recorder};
+use super::reconnect::ReconnectingClient;
 use super::{first_frame, next_frame, parse_intrinsics, Interrupted, StopFlag};
 
 /// Arguments of `dear record` (the command's help text is on [`super::Command::Record`]).
@@ -108,14 +109,20 @@ pub fn run(args: &RecordArgs) -> anyhow::Result<()> {
             }
         )
     })?;
-    let client = match Client::connect(&args.service) {
+    let mut client = match ReconnectingClient::connect(&args.service) {
         Ok(client) => client,
         Err(e) => {
             remove_unused(&args.mcap);
             return Err(e.into());
         }
     };
-    let first = match first_frame(&client, &args.service, args.timeout_s, &args.mcap, &stop) {
+    let first = match first_frame(
+        &mut client,
+        &args.service,
+        args.timeout_s,
+        &args.mcap,
+        &stop,
+    ) {
         Ok(frame) => frame,
         Err(e) => {
             remove_unused(&args.mcap);
@@ -137,7 +144,7 @@ pub fn run(args: &RecordArgs) -> anyhow::Result<()> {
     };
     let outcome = record(
         args,
-        &client,
+        &mut client,
         first,
         &mut recorder,
         end_at,
@@ -164,7 +171,14 @@ pub fn run(args: &RecordArgs) -> anyhow::Result<()> {
             )))
         }
     };
-    super::write_stdout(&format!("{}\n", report(args, &summary, started.elapsed())))?;
+    let mut line = report(args, &summary, started.elapsed());
+    if client.reconnects() > 0 {
+        line += &format!(
+            "; another process corrupted the channel and it was connected again {} times",
+            client.reconnects()
+        );
+    }
+    super::write_stdout(&format!("{line}\n"))?;
     match end {
         End::Limit => Ok(()),
         // Without --count or --seconds a signal is how a recording ends.
@@ -181,7 +195,7 @@ pub fn run(args: &RecordArgs) -> anyhow::Result<()> {
 /// The frame loop: writes `first` and every frame after it until a limit, a signal or an error.
 fn record(
     args: &RecordArgs,
-    client: &Client,
+    client: &mut ReconnectingClient,
     first: Frame,
     recorder: &mut Recorder<BufWriter<File>>,
     end_at: Option<Instant>,

@@ -5,8 +5,9 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::Args;
-use dear_client::{Client, ReceiveError};
+use dear_client::ReceiveError;
 
+use super::reconnect::ReconnectingClient;
 use super::stats::Window;
 use super::StopFlag;
 
@@ -27,16 +28,11 @@ pub struct WatchArgs {
     pub count_seconds: Option<u64>,
 }
 
-/// How often a client whose channel was corrupted tries to connect again (the daemon makes a
-/// damaged service again within about two seconds).
-const RECONNECT: Duration = Duration::from_millis(500);
-
 pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
     let stop = StopFlag::install()?;
-    // `None` while the channel is being made again after a corruption (issue 34): a watch
-    // keeps its lines coming (frames 0 meanwhile) instead of exiting.
-    let mut client = Some(Client::connect(&args.service)?);
-    let mut next_connect = Instant::now();
+    // A channel another process corrupts is connected again (issue 34): the lines go on,
+    // with no frames meanwhile.
+    let mut client = ReconnectingClient::connect(&args.service)?;
     let mut out = std::io::stdout().lock();
     let mut window = Window::default();
     let mut lines = 0u64;
@@ -46,33 +42,7 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
         let wait = next_line
             .saturating_duration_since(Instant::now())
             .min(POLL);
-        let Some(connected) = client.as_ref() else {
-            std::thread::sleep(wait);
-            if Instant::now() >= next_connect {
-                match Client::connect(&args.service) {
-                    Ok(c) => {
-                        tracing::warn!(service = %args.service, "connected again");
-                        client = Some(c);
-                    }
-                    Err(e) => {
-                        tracing::debug!(error = %e, "not connected yet");
-                        next_connect = Instant::now() + RECONNECT;
-                    }
-                }
-            }
-            if !write_line_if_due(
-                args,
-                &mut out,
-                &mut window,
-                &mut window_start,
-                &mut next_line,
-                &mut lines,
-            )? {
-                return Ok(());
-            }
-            continue;
-        };
-        match connected.wait(wait) {
+        match client.wait(wait) {
             Ok(Some(frame)) => {
                 let received = dear_proto::time::monotonic_ns();
                 window.push(frame.header(), received);
@@ -89,56 +59,25 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
             }
             // Ctrl-C interrupts the wait; that is a stop, not a failure.
             Err(_) if stop.is_set() => break,
-            // Another process wrote into this client's shared records: this channel is
-            // lost, the service is not. Connect again and go on counting.
-            Err(e @ ReceiveError::Corrupted { .. }) => {
-                tracing::warn!(error = %e, "connecting again");
-                client = None;
-                next_connect = Instant::now() + RECONNECT;
-            }
             Err(e) => return Err(e.into()),
         }
-        if !write_line_if_due(
-            args,
-            &mut out,
-            &mut window,
-            &mut window_start,
-            &mut next_line,
-            &mut lines,
-        )? {
-            return Ok(());
+        let now = Instant::now();
+        if now >= next_line {
+            let report = window.report(now - window_start);
+            let line = if args.json {
+                serde_json::to_string(&report).context("cannot encode the statistics as JSON")?
+            } else {
+                report.to_string()
+            };
+            // A closed pipe (`dear watch | head`) ends the command quietly.
+            if writeln!(out, "{line}").and_then(|()| out.flush()).is_err() {
+                return Ok(());
+            }
+            lines += 1;
+            window_start = now;
+            // Keep a steady cadence, but never try to catch up with missed seconds.
+            next_line = (next_line + Duration::from_secs(1)).max(now + Duration::from_millis(500));
         }
     }
     Ok(())
-}
-
-/// Writes the window's line when its second is over, and counts it in `lines`. `Ok(false)`
-/// when stdout is closed (`dear watch | head`), which ends the command quietly; `Err` only when
-/// the report cannot be encoded.
-fn write_line_if_due(
-    args: &WatchArgs,
-    out: &mut impl Write,
-    window: &mut Window,
-    window_start: &mut Instant,
-    next_line: &mut Instant,
-    lines: &mut u64,
-) -> anyhow::Result<bool> {
-    let now = Instant::now();
-    if now < *next_line {
-        return Ok(true);
-    }
-    let report = window.report(now - *window_start);
-    let line = if args.json {
-        serde_json::to_string(&report).context("cannot encode the statistics as JSON")?
-    } else {
-        report.to_string()
-    };
-    if writeln!(out, "{line}").and_then(|()| out.flush()).is_err() {
-        return Ok(false);
-    }
-    *lines += 1;
-    *window_start = now;
-    // Keep a steady cadence, but never try to catch up with missed seconds.
-    *next_line = (*next_line + Duration::from_secs(1)).max(now + Duration::from_millis(500));
-    Ok(true)
 }

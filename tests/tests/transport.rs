@@ -924,3 +924,61 @@ fn dear_watch_connects_again_after_its_channel_is_corrupted() {
     watch.wait().unwrap();
     assert!(daemon.is_running(), "{}", daemon.log_text());
 }
+
+/// `dear record` goes on recording through a corrupted channel too (the same reconnecting
+/// client as `dear watch`), and its last line says how often it connected again.
+#[test]
+fn dear_record_keeps_recording_after_its_channel_is_corrupted() {
+    let s = setup(clients_group());
+    let service = unique_service("record-reconnect");
+    let mut daemon = s.daemon(&service, "deard.log");
+    daemon
+        .wait_for_log_line("serving", WAIT)
+        .expect("deard serves");
+    let mcap = s.dir.join("rec.mcap");
+    let (out, err) = (s.dir.join("record.out"), s.dir.join("record.err"));
+    let mut record = Command::new(dear_test_support::paths::binary("dear"))
+        .args(["record", "--service", &service, "--seconds", "8", "--mcap"])
+        .arg(&mcap)
+        .env(dear_proto::IOX2_ROOT_ENV, &s.root)
+        .stdout(std::fs::File::create(&out).unwrap())
+        .stderr(std::fs::File::create(&err).unwrap())
+        .spawn()
+        .unwrap();
+    let read = |p: &PathBuf| std::fs::read_to_string(p).unwrap_or_default();
+    wait_until(
+        "the recording's channel",
+        WAIT,
+        || !s.files(".connection").is_empty(),
+        || read(&err),
+    );
+    let mut scribbler = Scribbler(0x78);
+    let mut writes = 0;
+    while !read(&err).contains("connecting again") {
+        assert!(
+            record.try_wait().unwrap().is_none(),
+            "dear record ended after {writes} writes: {}",
+            read(&err)
+        );
+        assert!(writes < 5_000, "no corruption noticed in {writes} writes");
+        for file in s.files(".connection") {
+            scribbler.scribble(&file);
+        }
+        writes += 1;
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let status = record.wait().unwrap();
+    let summary = read(&out);
+    assert!(status.success(), "{status}: {}\n{summary}", read(&err));
+    assert!(
+        summary.contains("connected again") && summary.starts_with("recorded "),
+        "{summary}"
+    );
+    let frames: u64 = summary
+        .split_whitespace()
+        .nth(1)
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{summary}"));
+    assert!(frames > 0, "{summary}");
+    assert!(daemon.is_running(), "{}", daemon.log_text());
+}
