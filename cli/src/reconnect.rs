@@ -3,6 +3,12 @@
 //! ([`ReceiveError::Corrupted`]) and nothing more arrives through that [`Client`]; the service
 //! itself goes on (deard makes a damaged service again within about two seconds). `watch`,
 //! `record` and `dump` keep going through [`ReconnectingClient`] instead of ending.
+//!
+//! Some writes break a channel silently: a connection overwritten whole (every byte `0xff`)
+//! has queue positions that look like an empty queue, and the daemon's end gives up on it, so
+//! nothing arrives and nothing is reported. A channel that delivers nothing for [`STALL`] is
+//! therefore connected again too; on a healthy but idle service that costs a reconnection
+//! every few seconds and loses nothing.
 
 use std::time::{Duration, Instant};
 
@@ -10,6 +16,8 @@ use dear_client::{Client, ConnectError, Frame, ReceiveError};
 
 /// How often a lost channel is connected again.
 const RECONNECT: Duration = Duration::from_millis(500);
+/// How long a channel may deliver nothing before it is connected again (see the module docs).
+pub const STALL: Duration = Duration::from_secs(3);
 
 /// A [`Client`] that connects again after its channel was corrupted.
 pub struct ReconnectingClient {
@@ -17,6 +25,8 @@ pub struct ReconnectingClient {
     /// `None` while the channel is being made again.
     client: Option<Client>,
     next_connect: Instant,
+    /// When the channel last delivered a frame, or was connected.
+    last_frame: Instant,
     reconnects: u64,
 }
 
@@ -31,13 +41,14 @@ impl ReconnectingClient {
             service: service.to_string(),
             client: Some(Client::connect(service)?),
             next_connect: Instant::now(),
+            last_frame: Instant::now(),
             reconnects: 0,
         })
     }
 
-    /// As [`Client::wait`]; a corrupted channel is dropped, said once on stderr (as a
-    /// warning) and connected again every 0.5 s, and meanwhile this waits `timeout` and
-    /// returns `Ok(None)`.
+    /// As [`Client::wait`]; a corrupted channel, or one that delivered nothing for
+    /// [`STALL`], is dropped, said on stderr (as a warning) and connected again every 0.5 s,
+    /// and meanwhile this waits `timeout` and returns `Ok(None)`.
     ///
     /// # Errors
     /// Every error of [`Client::wait`] but [`ReceiveError::Corrupted`].
@@ -50,12 +61,25 @@ impl ReconnectingClient {
         match client.wait(timeout) {
             Err(e @ ReceiveError::Corrupted { .. }) => {
                 tracing::warn!(error = %e, "connecting again");
-                self.client = None;
-                self.next_connect = Instant::now() + RECONNECT;
+                self.drop_channel();
                 Ok(None)
+            }
+            Ok(None) if self.last_frame.elapsed() >= STALL => {
+                tracing::warn!(service = %self.service, seconds = STALL.as_secs(), "no frame through this channel for a while: connecting again");
+                self.drop_channel();
+                Ok(None)
+            }
+            Ok(Some(frame)) => {
+                self.last_frame = Instant::now();
+                Ok(Some(frame))
             }
             other => other,
         }
+    }
+
+    fn drop_channel(&mut self) {
+        self.client = None;
+        self.next_connect = Instant::now() + RECONNECT;
     }
 
     /// How many times the channel was connected again.
@@ -71,6 +95,7 @@ impl ReconnectingClient {
             Ok(client) => {
                 tracing::warn!(service = %self.service, "connected again");
                 self.client = Some(client);
+                self.last_frame = Instant::now();
                 self.reconnects += 1;
             }
             Err(e) => {

@@ -135,7 +135,17 @@ pub struct FramePublisher {
     records: RefCell<RecordCheck>,
     /// The names of the services' records as last made (kept while `ports` is `None`).
     record_names: transport_guard::ServiceRecordNames,
+    /// Loans that failed in a row since the last one that succeeded ([`STARVED_LOANS`]).
+    failed_loans: Cell<u32>,
 }
+
+/// Failed loans in a row after which the service is made again ([`FramePublisher::check_transport`]):
+/// about a second of frames. Issue 34: a client whose connection another process overwrote
+/// whole keeps the samples lent to it, and the publisher no longer takes anything back through
+/// that connection, nor, as iceoryx2 0.10 stands, when it goes: every sample ends up lent and
+/// every later frame would be skipped (`OutOfMemory`). A new service has all its samples;
+/// clients connect again.
+const STARVED_LOANS: u32 = 30;
 
 impl FramePublisher {
     /// Creates the node, cleans up what crashed processes left behind, and opens the services.
@@ -177,6 +187,7 @@ impl FramePublisher {
             sequence: Cell::new(0),
             ports: RefCell::new(Some(ports)),
             records: RefCell::new(RecordCheck::default()),
+            failed_loans: Cell::new(0),
             record_names,
         })
     }
@@ -187,7 +198,8 @@ impl FramePublisher {
     /// clients keep the old files mapped and stop receiving; new clients (and clients that
     /// connect again) find the new service. The same when a client damaged the services'
     /// shared records (`*.dynamic`) at two checks in a row ([`RecordCheck`]): their old files
-    /// are removed first, or the new node would open them again.
+    /// are removed first, or the new node would open them again. And when no sample could be
+    /// loaned for [`STARVED_LOANS`] frames in a row.
     pub fn check_transport(&self) {
         // A link swapped in while serving: iceoryx2 would follow it when it makes or removes
         // a node's directory (a client joining or a dead one cleaned up).
@@ -206,6 +218,8 @@ impl FramePublisher {
             } else if let Some(why) = self.records.borrow_mut().check(p, &self.root) {
                 damaged = transport_guard::service_records(&self.root, &p.records);
                 tracing::error!(reason = %why, files = ?damaged, service = %self.name, "a client damaged the service's shared records: new clients could not use them; making the service again");
+            } else if self.failed_loans.get() >= STARVED_LOANS {
+                tracing::error!(failed_loans = self.failed_loans.get(), service = %self.name, "no sample could be loaned for the last frames: every sample is held by damaged channels; making the service again");
             } else {
                 return;
             }
@@ -222,6 +236,7 @@ impl FramePublisher {
             }
         }
         *self.records.borrow_mut() = RecordCheck::default();
+        self.failed_loans.set(0);
         let reopened = dear_proto::transport::prepare_root(&self.config)
             .map_err(|e| e.to_string())
             .and_then(|_| {
@@ -285,14 +300,15 @@ impl FramePublisher {
         };
         let t_loan = Instant::now();
         // `loan_slice` zero-fills (one memset); the frame itself is never copied afterwards.
-        let mut sample =
-            ports
-                .publisher
-                .loan_slice(layout.size)
-                .map_err(|source| PublishError::Loan {
-                    service: self.name.clone(),
-                    source,
-                })?;
+        let mut sample = ports.publisher.loan_slice(layout.size).map_err(|source| {
+            self.failed_loans
+                .set(self.failed_loans.get().saturating_add(1));
+            PublishError::Loan {
+                service: self.name.clone(),
+                source,
+            }
+        })?;
+        self.failed_loans.set(0);
         let loan_us = micros(t_loan);
         let payload = sample.payload_mut();
         let (depth_bytes, rest) = payload.split_at_mut(layout.rgb_offset);

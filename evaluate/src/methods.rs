@@ -7,7 +7,7 @@ use ndarray::Array2;
 use crate::edge_matching::{estimate_calibration_or, EdgeMatchParams};
 use dear_capture::frame::Flow;
 use dear_capture::Calibration;
-use dear_capture::Sample;
+use dear_capture::{RgbdFrame, Sample};
 use dear_pipeline::align::StaticAligner;
 use dear_pipeline::filter::ClassicalRefiner;
 use dear_pipeline::recalibration::direct::{estimate_calibration_direct, DirectFitParams};
@@ -82,6 +82,20 @@ pub struct MethodOutput {
     pub expected_error_code: Option<Array2<u8>>,
 }
 
+impl MethodOutput {
+    /// The measurement itself as a method's output: the "ToF input" row (`raw-tof`).
+    pub fn measurement(frame: &RgbdFrame) -> Self {
+        MethodOutput {
+            depth: frame.depth.clone(),
+            flow: None,
+            flow_rough: None,
+            calibration: None,
+            seconds: 0.0,
+            expected_error_code: None,
+        }
+    }
+}
+
 /// Runs methods over frames, keeping scratch buffers between frames.
 pub struct MethodRunner {
     initial: Calibration,
@@ -111,12 +125,8 @@ impl MethodRunner {
         let (calibration, refine) = match method {
             Method::RawTof => {
                 return Some(MethodOutput {
-                    depth: frame.depth.clone(),
-                    flow: None,
-                    flow_rough: None,
-                    calibration: None,
                     seconds: start.elapsed().as_secs_f64(),
-                    expected_error_code: None,
+                    ..MethodOutput::measurement(frame)
                 })
             }
             Method::StaticCalibration => (self.initial, false),

@@ -6,7 +6,7 @@
 
 use std::path::PathBuf;
 
-use dear_eval::{ground_truth_mask, BundleMethod, Evaluation};
+use dear_eval::{ground_truth_mask, BundleMethod, Evaluation, MethodOutput};
 use dear_pipeline::model::ModelBundle;
 use dear_synth::family::Family;
 use dear_synth::scene::Scene;
@@ -29,7 +29,13 @@ fn the_guarded_refiner_says_how_wrong_it_expects_to_be_wherever_it_publishes_dep
         let scene = Scene::random(camera, &params.scene, params.seed, i);
         let sample = simulate(&scene, &params.sim, params.seed, i).into_capture_sample(i, 0);
         let valid = ground_truth_mask(&sample).unwrap();
-        eval.add("input", &sample, &raw(&sample), valid.view(), None);
+        eval.add(
+            "input",
+            &sample,
+            &MethodOutput::measurement(&sample.frame),
+            valid.view(),
+            None,
+        );
         let out = guarded.run_refine_only(&sample).unwrap().unwrap();
         let codes = out
             .expected_error_code
@@ -50,16 +56,4 @@ fn the_guarded_refiner_says_how_wrong_it_expects_to_be_wherever_it_publishes_dep
         !reliability.is_empty(),
         "the guarded rows carry a reliability table"
     );
-}
-
-/// The measurement as a method's output (the "ToF input" row).
-fn raw(sample: &dear_capture::Sample) -> dear_eval::MethodOutput {
-    dear_eval::MethodOutput {
-        depth: sample.frame.depth.clone(),
-        flow: None,
-        flow_rough: None,
-        calibration: None,
-        seconds: 0.0,
-        expected_error_code: None,
-    }
 }

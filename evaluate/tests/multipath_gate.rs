@@ -37,14 +37,7 @@ fn input_and_refined(
         let scene = Scene::random(camera, &params.scene, params.seed, i);
         let sample = simulate(&scene, &params.sim, params.seed, i).into_capture_sample(i, 0);
         let valid = ground_truth_mask(&sample).unwrap();
-        let input = MethodOutput {
-            depth: sample.frame.depth.clone(),
-            flow: None,
-            flow_rough: None,
-            calibration: None,
-            seconds: 0.0,
-            expected_error_code: None,
-        };
+        let input = MethodOutput::measurement(&sample.frame);
         eval.add("input", &sample, &input, valid.view(), None);
         let out = refiner.run_refine_only(&sample).unwrap().unwrap();
         eval.add("edge", &sample, &out, valid.view(), None);

@@ -856,9 +856,38 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_another_client() {
     a_fresh_client_receives(&s, &service, &mut daemon);
 }
 
+/// Overwrites every `*.connection` file (the only subscriber is `client`'s, so all are its
+/// channels) with `0xff` bytes until `client` says on stderr (`err`) that it is connecting
+/// again; it must not end meanwhile. Not random writes: those may take many seconds to hit
+/// what the SDK checks; a whole record of `0xff` puts its queue positions out of range at once.
+fn corrupt_until_it_connects_again(
+    s: &Setup,
+    client: &mut std::process::Child,
+    err: &std::path::Path,
+) {
+    use std::os::unix::fs::FileExt;
+    let read = || std::fs::read_to_string(err).unwrap_or_default();
+    let mut writes = 0;
+    while !read().contains("connecting again") {
+        assert!(
+            client.try_wait().unwrap().is_none(),
+            "the client ended after {writes} writes: {}",
+            read()
+        );
+        assert!(writes < 500, "no corruption noticed in {writes} writes");
+        for file in s.files(".connection") {
+            if let Ok(f) = std::fs::OpenOptions::new().write(true).open(&file) {
+                let size = f.metadata().map(|m| m.len() as usize).unwrap_or(0);
+                f.write_all_at(&vec![0xff; size], 0).ok();
+            }
+        }
+        writes += 1;
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// `dear watch` whose channel another process corrupts connects again and goes on reporting
-/// frames, instead of exiting (issue 34). Only the watch subscribes, so every `*.connection`
-/// file is one of its channels; the writes go on until it says it is connecting again.
+/// frames, instead of exiting (issue 34).
 #[test]
 fn dear_watch_connects_again_after_its_channel_is_corrupted() {
     let s = setup(clients_group());
@@ -888,21 +917,7 @@ fn dear_watch_connects_again_after_its_channel_is_corrupted() {
         || frames_per_line(&read(&out)).iter().any(|&n| n > 0),
         || read(&err),
     );
-    let mut scribbler = Scribbler(0x77);
-    let mut writes = 0;
-    while !read(&err).contains("connecting again") {
-        assert!(
-            watch.try_wait().unwrap().is_none(),
-            "dear watch ended after {writes} writes: {}",
-            read(&err)
-        );
-        assert!(writes < 5_000, "no corruption noticed in {writes} writes");
-        for file in s.files(".connection") {
-            scribbler.scribble(&file);
-        }
-        writes += 1;
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    corrupt_until_it_connects_again(&s, &mut watch, &err);
     let lines_then = frames_per_line(&read(&out)).len();
     wait_until(
         "a line with frames after connecting again",
@@ -926,7 +941,8 @@ fn dear_watch_connects_again_after_its_channel_is_corrupted() {
 }
 
 /// `dear record` goes on recording through a corrupted channel too (the same reconnecting
-/// client as `dear watch`), and its last line says how often it connected again.
+/// client as `dear watch`), and its last line says how often it connected again. It is ended
+/// by Ctrl-C once it has connected again, as a recording without a limit is.
 #[test]
 fn dear_record_keeps_recording_after_its_channel_is_corrupted() {
     let s = setup(clients_group());
@@ -938,7 +954,7 @@ fn dear_record_keeps_recording_after_its_channel_is_corrupted() {
     let mcap = s.dir.join("rec.mcap");
     let (out, err) = (s.dir.join("record.out"), s.dir.join("record.err"));
     let mut record = Command::new(dear_test_support::paths::binary("dear"))
-        .args(["record", "--service", &service, "--seconds", "8", "--mcap"])
+        .args(["record", "--service", &service, "--mcap"])
         .arg(&mcap)
         .env(dear_proto::IOX2_ROOT_ENV, &s.root)
         .stdout(std::fs::File::create(&out).unwrap())
@@ -946,27 +962,25 @@ fn dear_record_keeps_recording_after_its_channel_is_corrupted() {
         .spawn()
         .unwrap();
     let read = |p: &PathBuf| std::fs::read_to_string(p).unwrap_or_default();
+    // Frames are being written (the MCAP grows past its 1 MiB write buffer) before the channel
+    // is corrupted.
     wait_until(
-        "the recording's channel",
+        "frames in the recording",
         WAIT,
-        || !s.files(".connection").is_empty(),
+        || std::fs::metadata(&mcap).is_ok_and(|m| m.len() > 0),
         || read(&err),
     );
-    let mut scribbler = Scribbler(0x78);
-    let mut writes = 0;
-    while !read(&err).contains("connecting again") {
-        assert!(
-            record.try_wait().unwrap().is_none(),
-            "dear record ended after {writes} writes: {}",
-            read(&err)
-        );
-        assert!(writes < 5_000, "no corruption noticed in {writes} writes");
-        for file in s.files(".connection") {
-            scribbler.scribble(&file);
-        }
-        writes += 1;
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    corrupt_until_it_connects_again(&s, &mut record, &err);
+    wait_until(
+        "the recording connected again",
+        WAIT,
+        || read(&err).contains("connected again"),
+        || read(&err),
+    );
+    // A few frames through the new channel, then Ctrl-C: how a recording without a limit ends.
+    std::thread::sleep(Duration::from_secs(1));
+    // SAFETY: kill with a valid pid of our child and a signal number has no preconditions.
+    unsafe { libc::kill(record.id() as i32, libc::SIGINT) };
     let status = record.wait().unwrap();
     let summary = read(&out);
     assert!(status.success(), "{status}: {}\n{summary}", read(&err));
