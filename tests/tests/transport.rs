@@ -893,6 +893,17 @@ fn scribble_on_its_channels(
     );
 }
 
+/// A client process killed when the test ends, failed or not (a panicking test would leave it
+/// running otherwise).
+struct Killed(std::process::Child);
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// `dear watch` whose channels another process writes into goes on reporting frames (it
 /// connects again when a channel broke), instead of exiting (issue 34).
 #[test]
@@ -904,13 +915,15 @@ fn dear_watch_keeps_reporting_while_its_channels_are_written_into() {
         .wait_for_log_line("serving", WAIT)
         .expect("deard serves");
     let (out, err) = (s.dir.join("watch.out"), s.dir.join("watch.err"));
-    let mut watch = Command::new(dear_test_support::paths::binary("dear"))
-        .args(["watch", "--json", "--service", &service])
-        .env(dear_proto::IOX2_ROOT_ENV, &s.root)
-        .stdout(std::fs::File::create(&out).unwrap())
-        .stderr(std::fs::File::create(&err).unwrap())
-        .spawn()
-        .unwrap();
+    let mut watch = Killed(
+        Command::new(dear_test_support::paths::binary("dear"))
+            .args(["watch", "--json", "--service", &service])
+            .env(dear_proto::IOX2_ROOT_ENV, &s.root)
+            .stdout(std::fs::File::create(&out).unwrap())
+            .stderr(std::fs::File::create(&err).unwrap())
+            .spawn()
+            .unwrap(),
+    );
     let frames_per_line = |text: &str| -> Vec<u64> {
         text.lines()
             .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
@@ -924,7 +937,7 @@ fn dear_watch_keeps_reporting_while_its_channels_are_written_into() {
         || frames_per_line(&read(&out)).iter().any(|&n| n > 0),
         || read(&err),
     );
-    scribble_on_its_channels(&s, &mut watch, &err, 0x77);
+    scribble_on_its_channels(&s, &mut watch.0, &err, 0x77);
     let lines_then = frames_per_line(&read(&out)).len();
     wait_until(
         "a line with frames after the writes",
@@ -938,12 +951,10 @@ fn dear_watch_keeps_reporting_while_its_channels_are_written_into() {
         || format!("{}\n{}", read(&err), daemon.log_text()),
     );
     assert!(
-        watch.try_wait().unwrap().is_none(),
+        watch.0.try_wait().unwrap().is_none(),
         "dear watch ended: {}",
         read(&err)
     );
-    watch.kill().unwrap();
-    watch.wait().unwrap();
     assert!(daemon.is_running(), "{}", daemon.log_text());
 }
 
@@ -960,14 +971,16 @@ fn dear_record_keeps_recording_while_its_channels_are_written_into() {
         .expect("deard serves");
     let mcap = s.dir.join("rec.mcap");
     let (out, err) = (s.dir.join("record.out"), s.dir.join("record.err"));
-    let mut record = Command::new(dear_test_support::paths::binary("dear"))
-        .args(["record", "--service", &service, "--mcap"])
-        .arg(&mcap)
-        .env(dear_proto::IOX2_ROOT_ENV, &s.root)
-        .stdout(std::fs::File::create(&out).unwrap())
-        .stderr(std::fs::File::create(&err).unwrap())
-        .spawn()
-        .unwrap();
+    let mut record = Killed(
+        Command::new(dear_test_support::paths::binary("dear"))
+            .args(["record", "--service", &service, "--mcap"])
+            .arg(&mcap)
+            .env(dear_proto::IOX2_ROOT_ENV, &s.root)
+            .stdout(std::fs::File::create(&out).unwrap())
+            .stderr(std::fs::File::create(&err).unwrap())
+            .spawn()
+            .unwrap(),
+    );
     let read = |p: &PathBuf| std::fs::read_to_string(p).unwrap_or_default();
     // Frames are being written (the MCAP grows past its 1 MiB write buffer) before the channel
     // is corrupted.
@@ -977,7 +990,7 @@ fn dear_record_keeps_recording_while_its_channels_are_written_into() {
         || std::fs::metadata(&mcap).is_ok_and(|m| m.len() > 0),
         || read(&err),
     );
-    scribble_on_its_channels(&s, &mut record, &err, 0x78);
+    scribble_on_its_channels(&s, &mut record.0, &err, 0x78);
     // Frames after the writes (through a new channel if one broke), then Ctrl-C: how a
     // recording without a limit ends. Its MCAP keeps growing when frames arrive.
     let size = || std::fs::metadata(&mcap).map(|m| m.len()).unwrap_or(0);
@@ -989,8 +1002,8 @@ fn dear_record_keeps_recording_while_its_channels_are_written_into() {
         || read(&err),
     );
     // SAFETY: kill with a valid pid of our child and a signal number has no preconditions.
-    unsafe { libc::kill(record.id() as i32, libc::SIGINT) };
-    let status = record.wait().unwrap();
+    unsafe { libc::kill(record.0.id() as i32, libc::SIGINT) };
+    let status = record.0.wait().unwrap();
     let summary = read(&out);
     assert!(status.success(), "{status}: {}\n{summary}", read(&err));
     assert!(summary.starts_with("recorded "), "{summary}");
