@@ -9,8 +9,6 @@ use std::path::PathBuf;
 use dear_eval::{ground_truth_mask, BundleMethod, Evaluation, MethodOutput};
 use dear_pipeline::model::ModelBundle;
 use dear_synth::family::Family;
-use dear_synth::scene::Scene;
-use dear_synth::simulate::simulate;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -21,13 +19,11 @@ fn the_guarded_refiner_says_how_wrong_it_expects_to_be_wherever_it_publishes_dep
     let (w, h) = (160, 120);
     // Seeds no test set uses; three frames of one clean module.
     let params = Family::Clean.draw(4343, 0, 3, w, h);
-    let camera = params.camera();
     let guarded = ModelBundle::load(root().join("models/edge-guarded")).unwrap();
     let mut guarded = BundleMethod::new(&guarded, "guarded", h, w).unwrap();
     let mut eval = Evaluation::new();
     for i in 0..3 {
-        let scene = Scene::random(camera, &params.scene, params.seed, i);
-        let sample = simulate(&scene, &params.sim, params.seed, i).into_capture_sample(i, 0);
+        let sample = params.sample(i);
         let valid = ground_truth_mask(&sample).unwrap();
         eval.add(
             "input",

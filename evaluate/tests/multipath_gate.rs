@@ -13,8 +13,6 @@ use std::path::PathBuf;
 use dear_eval::{ground_truth_mask, BundleMethod, Evaluation, MethodOutput};
 use dear_pipeline::model::ModelBundle;
 use dear_synth::family::Family;
-use dear_synth::scene::Scene;
-use dear_synth::simulate::simulate;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
@@ -29,13 +27,11 @@ fn input_and_refined(
     (w, h): (usize, usize),
 ) -> [(f64, f64); 2] {
     let params = family.draw(seed, 0, frames, w, h);
-    let camera = params.camera();
     let bundle = ModelBundle::load(root().join("models/edge")).unwrap();
     let mut refiner = BundleMethod::new(&bundle, "edge", h, w).unwrap();
     let mut eval = Evaluation::new();
     for i in 0..frames as u64 {
-        let scene = Scene::random(camera, &params.scene, params.seed, i);
-        let sample = simulate(&scene, &params.sim, params.seed, i).into_capture_sample(i, 0);
+        let sample = params.sample(i);
         let valid = ground_truth_mask(&sample).unwrap();
         let input = MethodOutput::measurement(&sample.frame);
         eval.add("input", &sample, &input, valid.view(), None);

@@ -8,7 +8,7 @@
 use std::path::Path;
 
 use anyhow::{Context, Result};
-use dear_capture::{CaptureManifest, CaptureWriter, Intrinsics};
+use dear_capture::{CaptureManifest, CaptureWriter, Intrinsics, Sample};
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
@@ -33,6 +33,12 @@ pub struct GenerateParams {
 impl GenerateParams {
     pub fn camera(&self) -> Camera {
         Camera::from_hfov(self.width, self.height, self.hfov_deg)
+    }
+
+    /// Frame `i` of these settings (deterministic in `(seed, i)`), as [`generate`] writes it.
+    pub fn sample(&self, i: u64) -> Sample {
+        let scene = Scene::random(self.camera(), &self.scene, self.seed, i);
+        simulate(&scene, &self.sim, self.seed, i).into_capture_sample(i, i * FRAME_INTERVAL_NS)
     }
 }
 
@@ -79,9 +85,7 @@ pub fn generate(
     )
     .with_context(|| format!("creating {}", out.display()))?;
     for i in 0..params.count {
-        let scene = Scene::random(camera, &params.scene, params.seed, i as u64);
-        let sample = simulate(&scene, &params.sim, params.seed, i as u64);
-        let sample = sample.into_capture_sample(i as u64, i as u64 * FRAME_INTERVAL_NS);
+        let sample = params.sample(i as u64);
         writer
             .write_sample(&sample.frame, &sample.truth)
             .with_context(|| format!("writing frame {i}"))?;
