@@ -30,8 +30,8 @@ import torch
 import torch.nn.functional as F
 
 from dear_train.data.capture import Capture, CaptureError
-from dear_train.data.dataset import normalize_amplitude
-from dear_train.export import CHECK_ATOL, OPSET, sha256
+from dear_train.data.dataset import Normalisation, normalize_amplitude
+from dear_train.export import CHECK_ATOL, OPSET, check_inputs, sha256
 from dear_train.models import param_count
 from dear_train.models.multipath_gate import (
     GRID,
@@ -42,6 +42,8 @@ from dear_train.models.multipath_gate import (
 
 #: Prefix of the gate's tensor names inside the composed refine graph.
 PREFIX = "multipath_gate/"
+#: The refiner's own maps inside the composed graph (the gate's input).
+UNGATED = PREFIX + "ungated_maps"
 #: What `attach` adds to the refine output's meaning in `model.json`.
 MEANING_SUFFIX = (
     "; bias, gate and trust already scaled by the frame's multi-path probability "
@@ -66,36 +68,49 @@ def shard_label(root: Path) -> float:
 
 
 def frame_inputs(capture: Capture, index: int) -> torch.Tensor:
-    """Frame ``index`` as the refine graph gets it (aligned), on the gate's grid ``(2, 60, 80)``."""
+    """Frame ``index`` as the refine graph gets it (aligned, the bundles' amplitude
+    normalisation), on the gate's grid ``(2, 60, 80)``."""
     frame = capture.load(index)
     depth = frame.depth.copy()
     if frame.mask is not None:
         depth[~frame.mask] = 0.0
-    amplitude = normalize_amplitude(frame.amplitude, depth, 99.0)
+    amplitude = normalize_amplitude(frame.amplitude, depth, Normalisation().amplitude_percentile)
     t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))[None, None]  # noqa: E731
     return pool_inputs(t(amplitude), t(depth))[0]
 
 
+def capture_grids(root: Path) -> torch.Tensor:
+    """Every frame of the capture ``root`` on the gate's grid, ``(frames, 2, 60, 80)``."""
+    capture = Capture(root)
+    if len(capture) == 0:
+        raise ValueError(f"{root}: no frames")
+    return torch.stack([frame_inputs(capture, i) for i in range(len(capture))])
+
+
 def load_grids(roots: list[Path]) -> tuple[torch.Tensor, torch.Tensor]:
     """Every frame of ``roots`` on the gate's grid, and its label."""
-    grids, labels = [], []
-    for root in roots:
-        label = shard_label(root)
-        capture = Capture(root)
-        for i in range(len(capture)):
-            grids.append(frame_inputs(capture, i))
-            labels.append(label)
-    if not grids:
-        raise ValueError(f"no frames in {', '.join(map(str, roots))}")
-    return torch.stack(grids), torch.tensor(labels)
+    if not roots:
+        raise ValueError("no captures given")
+    labels = [shard_label(root) for root in roots]
+    grids = [capture_grids(root) for root in roots]
+    per_frame = [torch.full((len(g),), label) for g, label in zip(grids, labels, strict=True)]
+    return torch.cat(grids), torch.cat(per_frame)
+
+
+def probabilities(gate: MultipathGate, grids: torch.Tensor) -> torch.Tensor:
+    """The gate's ``p`` for every frame of ``grids``, in evaluation mode, 64 frames at a time."""
+    was_training = gate.training
+    gate.eval()
+    with torch.no_grad():
+        p = torch.cat(
+            [torch.sigmoid(gate.logit(grids[i : i + 64])) for i in range(0, len(grids), 64)]
+        )
+    gate.train(was_training)
+    return p
 
 
 def accuracy(gate: MultipathGate, grids: torch.Tensor, labels: torch.Tensor) -> float:
-    gate.eval()
-    with torch.no_grad():
-        batches = [grids[i : i + 64] for i in range(0, len(grids), 64)]
-        p = torch.cat([torch.sigmoid(gate.logit(b)) for b in batches])
-    gate.train()
+    p = probabilities(gate, grids)
     return float(((p > 0.5).float() == labels).float().mean())
 
 
@@ -179,9 +194,8 @@ def compose(refine: onnx.ModelProto, gate_graph: onnx.ModelProto) -> onnx.ModelP
     the composed graph keeps the refine graph's inputs and output name. Every other tensor of
     the gate is renamed under :data:`PREFIX`."""
     (out,) = refine.graph.output
-    ungated = PREFIX + "ungated_maps"
     for node in refine.graph.node:
-        node.output[:] = [ungated if o == out.name else o for o in node.output]
+        node.output[:] = [UNGATED if o == out.name else o for o in node.output]
     shared = {"amplitude", "depth"}
     gate_in = [i.name for i in gate_graph.graph.input]
     if gate_in != ["amplitude", "depth", "maps"]:
@@ -192,7 +206,7 @@ def compose(refine: onnx.ModelProto, gate_graph: onnx.ModelProto) -> onnx.ModelP
         if name in shared or name == "":
             return name
         if name == gate_in[2]:
-            return ungated
+            return UNGATED
         if name == gate_out.name:
             return out.name
         return PREFIX + name
@@ -237,24 +251,15 @@ def export_gate_graph(gate: MultipathGate, channels: int, path: Path) -> None:
 
 
 def check_composed(
-    original: Path, composed: Path, gate: MultipathGate, sizes: list[tuple[int, int]]
+    original: Path, composed: Path, gate: MultipathGate, feeds: list[dict[str, np.ndarray]]
 ) -> float:
-    """Max |composed − (original maps gated in PyTorch)| over random inputs at ``sizes``."""
+    """Max |composed − (original maps gated in PyTorch)| over the refine graph's ``feeds``."""
     import onnxruntime as ort
 
     before = ort.InferenceSession(str(original), providers=["CPUExecutionProvider"])
     after = ort.InferenceSession(str(composed), providers=["CPUExecutionProvider"])
-    names = [i.name for i in before.get_inputs()]
     worst = 0.0
-    rng = np.random.default_rng(0)
-    for h, w in sizes:
-        shapes = {"amplitude": 1, "depth": 1, "rgb": 3, "classical": 1}
-        feed = {n: rng.random((1, shapes[n], h, w), dtype=np.float32) for n in names}
-        feed["depth"] *= 4
-        if "classical" in feed:
-            feed["classical"] = feed["depth"] + 0.01 * rng.standard_normal((1, 1, h, w)).astype(
-                np.float32
-            )
+    for feed in feeds:
         (maps,) = before.run(None, feed)
         (got,) = after.run(None, feed)
         with torch.no_grad():
@@ -266,6 +271,20 @@ def check_composed(
     if not worst <= CHECK_ATOL:
         raise RuntimeError(f"{composed}: differs from the gated maps by {worst:.3g} > {CHECK_ATOL}")
     return worst
+
+
+def refine_feeds(manifest: dict, sizes: list[tuple[int, int]]) -> list[dict[str, np.ndarray]]:
+    """The refine graph's check inputs at each ``(h, w)`` of ``sizes`` (``export.check_inputs``,
+    a rendered scene under the bundle's normalisation), by input name."""
+    norm = manifest["normalisation"]
+    names = [i["name"] for i in manifest["graphs"]["refine"]["inputs"]]
+    feeds = []
+    for h, w in sizes:
+        inputs = check_inputs(
+            manifest["variant"], norm["max_depth_m"], norm["amplitude_percentile"], h, w
+        )["refine"]
+        feeds.append({n: x.numpy() for n, x in zip(names, inputs, strict=True)})
+    return feeds
 
 
 def attach(args: argparse.Namespace) -> None:
@@ -291,7 +310,8 @@ def attach(args: argparse.Namespace) -> None:
         composed = compose(onnx.load(str(path)), onnx.load(str(gate_path)))
         onnx.save(composed, str(path))
         try:
-            diff = check_composed(original, path, gate, [(96, 128), (64, 80), (240, 320)])
+            feeds = refine_feeds(manifest, [(96, 128), (64, 80), (240, 320)])
+            diff = check_composed(original, path, gate, feeds)
         except Exception:
             # Never leave a bundle whose graph and manifest disagree.
             path.write_bytes(original.read_bytes())
@@ -332,10 +352,9 @@ def detach(args: argparse.Namespace) -> None:
     path = args.out / entry["file"]
     model = onnx.load(str(path))
     (out,) = model.graph.output
-    ungated = PREFIX + "ungated_maps"
     kept = [n for n in model.graph.node if not n.name.startswith(PREFIX)]
     for node in kept:
-        node.output[:] = [out.name if o == ungated else o for o in node.output]
+        node.output[:] = [out.name if o == UNGATED else o for o in node.output]
     del model.graph.node[:]
     model.graph.node.extend(kept)
     inits = [i for i in model.graph.initializer if not i.name.startswith(PREFIX)]
@@ -357,10 +376,7 @@ def score(args: argparse.Namespace) -> None:
     the capture records one (how a user checks the gate on their own recordings)."""
     gate, _ = load_gate(args.gate)
     for root in args.data:
-        capture = Capture(root)
-        grids = torch.stack([frame_inputs(capture, i) for i in range(len(capture))])
-        with torch.no_grad():
-            p = torch.sigmoid(gate.logit(grids))
+        p = probabilities(gate, capture_grids(root))
         try:
             label = f"multi-path {'yes' if shard_label(root) else 'no'}"
         except CaptureError:
@@ -393,7 +409,6 @@ def main(argv: list[str] | None = None) -> None:
     c.add_argument("--gate", type=Path, required=True, help="gate.pt from `dear-gate train`")
     c.add_argument("--data", type=Path, nargs="+", required=True, help="captures")
     args = parser.parse_args(argv)
-    torch.set_num_threads(max(1, torch.get_num_threads()))
     commands = {"train": train, "attach": attach, "detach": detach, "score": score}
     try:
         commands[args.command](args)
