@@ -31,9 +31,7 @@ from torch import nn
 GRID = (60, 80)
 #: Average pooling before the resize to :data:`GRID`: noise is averaged, not aliased.
 POOL = 4
-#: The refine inputs the gate reads: amplitude and depth (see :func:`features`).
-INPUT_CHANNELS = 2
-#: Channels of the features computed from them (:func:`features`).
+#: Channels of the features the CNN sees, computed from amplitude and depth (:func:`features`).
 FEATURE_CHANNELS = 6
 #: The hybrid head's channels that :func:`gate_maps` scales: the bias (``max_bias ·
 #: tanh``), the smoothing gate (``sigmoid``) and the trust in the classical estimate (the
