@@ -93,10 +93,11 @@ fi
 bundles=(--bundle models/edge)
 # The shipped refiner without its multi-path gate (issue 33): the row the gate must beat, on
 # every refinement set. The same refiner nodes and weights; only the gate's are taken out.
-rm -rf "$out/bundles/edge-without-gate"
+without_gate=$out/bundles/edge-without-gate
+rm -rf "$without_gate"
 mkdir -p "$out/bundles"
-.venv/bin/dear-gate detach --bundle models/edge --out "$out/bundles/edge-without-gate" > /dev/null
-ablations=(--bundle "$out/bundles/edge-without-gate")
+.venv/bin/dear-gate detach --bundle models/edge --out "$without_gate" > /dev/null
+ablations=(--bundle "$without_gate")
 for b in models/*/; do
     [ "${b%/}" != models/edge ] && [ -f "$b/model.json" ] || continue
     profile=$(.venv/bin/python -c 'import json, sys
@@ -132,7 +133,7 @@ for spec in clean:9003 empty:9004 wide:9005 dual-low:9006; do
     fi
     echo "== dear eval on $set"
     target/release/dear eval --capture "$data/$set" --baselines "${bundles[@]}" \
-        --bundle "$out/bundles/edge-without-gate" --figures 0 --out "$out/$set" > /dev/null
+        --bundle "$without_gate" --figures 0 --out "$out/$set" > /dev/null
     # Alignment on the same family misaligned at σ = 4 px (issue 32): the shipped bundle only,
     # every bundle shares its flow graphs.
     if ! current "$data/$set-sigma4"; then
