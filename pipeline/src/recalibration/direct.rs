@@ -77,6 +77,21 @@ pub struct DirectFitParams {
     /// Lines `flow = t/z + c` through the depth layers' peaks refined at the coarsest level
     /// (the best-scoring distinct ones) before one is kept.
     pub search_lines: usize,
+    /// Distinct fits of the coarsest level (best correlation first, flows at least 1 px apart)
+    /// refined down to the finest level, where the best is kept. Choosing at the coarsest level
+    /// alone kept the wrong basin on cluttered, noisy frames. Tuning sets as `blur_sigma`'s
+    /// (mean AEPE without the network, px; σ = 2 / 4 on the default family, then σ = 4 on
+    /// clean / wide / empty / held-out), one fit carried: 0.93 / 1.67, 1.26 / 0.62 / 1.07 /
+    /// 1.14; three, within `carry_margin` 0.05: 1.01 / 1.12, 1.06 / 0.61 / 0.95 / 0.85 (margin
+    /// 0.02: 1.31 on default σ = 4 and 1.01 held-out; 0.1 or no margin: within 0.02 of 0.05).
+    /// Aligned tuning frames stay at 0. Cost: 640×480 frames of a drifting sequence, one core,
+    /// 170 → 235 ms a fit; the worst case refines three fits at full resolution (about 490 ms).
+    /// Searching at full resolution instead (`coarse_width` 160 on 320×240) fitted about as
+    /// well (0.57 / 1.24, 1.10 / 0.49 / 0.98 / 0.77) but took 555 ms a 640×480 fit.
+    pub carried_fits: usize,
+    /// Only fits whose coarsest-level correlation is within this of the best one's are carried
+    /// (a clear winner is refined alone, which keeps the usual fit's cost down).
+    pub carry_margin: f32,
     /// Gaussian blur of both edge maps at every level, in that level's px; the coarser levels
     /// are made from the blurred finer ones. Tuned on rendered views (`dear-synth perturb
     /// --seed 11` of the 40-frame tuning sets of five families, which no table reports; mean
@@ -147,6 +162,8 @@ impl Default for DirectFitParams {
             search_radius_px: 32.0,
             search_candidates: 3,
             search_lines: 6,
+            carried_fits: 3,
+            carry_margin: 0.05,
             blur_sigma: 0.4,
             finest_blur_sigma: None,
             depth_edge_weight: 0.0,
@@ -262,20 +279,30 @@ pub fn estimate_calibration_direct_against(
 
     // Exhaustive search of c at the coarsest level, t held.
     let top = &pyramid[coarsest];
-    let candidates = search_offsets(top, &initial_theta, params);
+    let mut refined: Vec<(Theta, f64)> = search_offsets(top, &initial_theta, params)
+        .into_iter()
+        .map(|c| gauss_newton(top, c, fit_t, params.iterations, params.robust_k))
+        .filter(|(_, corr)| corr.is_finite())
+        .collect();
+    refined.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let carried = distinct_fits(
+        top,
+        refined,
+        params.carried_fits.max(1),
+        params.carry_margin,
+    );
     let mut best: Option<(Theta, f64)> = None;
-    for c in candidates {
-        let (theta, corr) = gauss_newton(top, c, fit_t, params.iterations, params.robust_k);
+    for (mut theta, mut corr) in carried {
+        for level in pyramid[finest..coarsest].iter().rev() {
+            (theta, corr) = gauss_newton(level, theta, fit_t, params.iterations, params.robust_k);
+        }
         if best.is_none_or(|(_, b)| corr > b) {
             best = Some((theta, corr));
         }
     }
-    let Some((mut theta, mut corr)) = best else {
+    let Some((theta, corr)) = best else {
         return fallback(initial_correlation as f32);
     };
-    for level in pyramid[finest..coarsest].iter().rev() {
-        (theta, corr) = gauss_newton(level, theta, fit_t, params.iterations, params.robust_k);
-    }
     let corr = corr as f32;
     if !corr.is_finite()
         || corr < params.min_correlation
@@ -759,6 +786,30 @@ fn mean_flow_change(level: &Level, a: &Theta, b: &Theta) -> f64 {
     } else {
         sum / n as f64
     }
+}
+
+/// The best `keep` of `fits` (sorted best first) whose flows differ by more than 1 px (full resolution) on average
+/// from every better one kept: fits that converged to one basin are refined once.
+fn distinct_fits(
+    level: &Level,
+    fits: Vec<(Theta, f64)>,
+    keep: usize,
+    margin: f32,
+) -> Vec<(Theta, f64)> {
+    let mut kept: Vec<(Theta, f64)> = Vec::with_capacity(keep);
+    let best = fits.first().map_or(f64::NEG_INFINITY, |f| f.1);
+    for fit in fits {
+        if kept.len() >= keep || fit.1 < best - margin as f64 {
+            break;
+        }
+        if kept
+            .iter()
+            .all(|(k, _)| mean_flow_change(level, k, &fit.0) > 1.0)
+        {
+            kept.push(fit);
+        }
+    }
+    kept
 }
 
 /// `std(1/z) / mean(1/z)` over the valid ToF pixels, weighted by their edge strength.
@@ -1453,6 +1504,37 @@ mod tests {
 
     /// A fit that explains the frame better but moves the flow further than
     /// [`DirectFitParams::max_mean_flow_change_px`] is refused; within it, taken.
+    #[test]
+    fn fits_carried_down_the_pyramid_are_distinct_and_close_to_the_best() {
+        let level = Level {
+            scale: 1.0,
+            tof_w: 4,
+            tof_h: 4,
+            t: vec![0.0; 16],
+            inv_depth: vec![0.5; 16],
+            rgb_w: 4,
+            rgb_h: 4,
+            rgb: vec![[0.0; 4]; 16],
+        };
+        let at = |cx: f32, corr: f64| {
+            let c = Calibration {
+                cx,
+                ..Calibration::IDENTITY
+            };
+            (Theta::from(c), corr)
+        };
+        // Best first: the best basin, a second start that converged into it (0.3 px away), a
+        // distinct basin within the margin, and one beyond it.
+        let fits = vec![at(0.0, 0.60), at(0.3, 0.59), at(3.0, 0.58), at(-4.0, 0.50)];
+        let cx = |kept: Vec<(Theta, f64)>| kept.iter().map(|(t, _)| t.p[2]).collect::<Vec<_>>();
+        assert_eq!(cx(distinct_fits(&level, fits.clone(), 3, 0.05)), [0.0, 3.0]);
+        assert_eq!(
+            cx(distinct_fits(&level, fits.clone(), 3, 1.0)),
+            [0.0, 3.0, -4.0]
+        );
+        assert_eq!(cx(distinct_fits(&level, fits, 1, 1.0)), [0.0]);
+    }
+
     #[test]
     fn a_fit_beyond_the_flow_change_limit_is_refused() {
         let truth = Calibration {
