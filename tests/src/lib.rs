@@ -5,6 +5,7 @@
 pub mod bundles;
 pub mod engines;
 pub mod processes;
+pub mod shared_records;
 
 /// Hex SHA-256 of bytes (what the probe prints for each frame's payload): the bundle
 /// format's digest.
