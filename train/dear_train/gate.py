@@ -29,12 +29,17 @@ import onnx
 import torch
 import torch.nn.functional as F
 
+from dear_train.augmentation import AugmentConfig, augment, draw_perturbation
 from dear_train.data.capture import Capture, CaptureError
 from dear_train.data.dataset import Normalisation, normalize_amplitude
 from dear_train.export import CHECK_ATOL, OPSET, check_inputs, sha256
+from dear_train.geometry import Calibration, warp_bilinear_np, warp_depth_np
 from dear_train.models import param_count
 from dear_train.models.multipath_gate import (
+    BIAS_CHANNEL,
+    GATE_CHANNEL,
     GRID,
+    SMOOTHING_FLOOR,
     GateOnMaps,
     MultipathGate,
     pool_inputs,
@@ -67,32 +72,63 @@ def shard_label(root: Path) -> float:
     return 1.0 if bounces > 1 else 0.0
 
 
-def frame_inputs(capture: Capture, index: int) -> torch.Tensor:
-    """Frame ``index`` as the refine graph gets it (aligned, the bundles' amplitude
-    normalisation), on the gate's grid ``(2, 60, 80)``."""
+def frame_inputs(capture: Capture, index: int, view: Calibration | None = None) -> torch.Tensor:
+    """Frame ``index`` as the refine graph gets it, on the gate's grid ``(2, 60, 80)``: depth and
+    the bundles' amplitude normalisation, warped into the RGB view of the misalignment ``view``
+    as the daemon warps them (depth discontinuity-aware, amplitude bilinear), or as they are
+    when ``view`` is None. A view needs an aligned frame with ground-truth depth."""
     frame = capture.load(index)
     depth = frame.depth.copy()
     if frame.mask is not None:
         depth[~frame.mask] = 0.0
     amplitude = normalize_amplitude(frame.amplitude, depth, Normalisation().amplitude_percentile)
+    if view is not None:
+        if frame.gt_depth is None or frame.perturbation != Calibration():
+            raise CaptureError(
+                f"{capture.root}: frame {index}: a warped copy needs an aligned frame with "
+                "ground-truth depth (a `dear-synth family` shard)"
+            )
+        synthesized = augment(frame.rgb, frame.gt_depth, view)
+        # Zero flow where the view has no ground truth, as the refiner's training feeds it.
+        u = np.where(synthesized.valid, synthesized.flow_u, 0.0)
+        v = np.where(synthesized.valid, synthesized.flow_v, 0.0)
+        depth = warp_depth_np(depth, u, v)
+        amplitude, _ = warp_bilinear_np(amplitude, u, v)
     t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))[None, None]  # noqa: E731
     return pool_inputs(t(amplitude), t(depth))[0]
 
 
-def capture_grids(root: Path) -> torch.Tensor:
-    """Every frame of the capture ``root`` on the gate's grid, ``(frames, 2, 60, 80)``."""
+def capture_grids(
+    root: Path, warped: int = 0, rng: np.random.Generator | None = None
+) -> torch.Tensor:
+    """Every frame of the capture ``root`` on the gate's grid, then ``warped`` copies of each
+    in views drawn by the refiner's augmentation (:func:`draw_perturbation`) from ``rng``:
+    ``((1 + warped)·frames, 2, 60, 80)``. The daemon refines depth warped into the RGB view,
+    and a gate that saw only aligned frames gives warped multi-path frames a lower ``p``."""
     capture = Capture(root)
     if len(capture) == 0:
         raise ValueError(f"{root}: no frames")
-    return torch.stack([frame_inputs(capture, i) for i in range(len(capture))])
+    if warped and rng is None:
+        raise ValueError("warped copies need a random generator")
+    grids = [frame_inputs(capture, i) for i in range(len(capture))]
+    for _ in range(warped):
+        for i in range(len(capture)):
+            assert rng is not None
+            h, w = capture.size
+            grids.append(frame_inputs(capture, i, draw_perturbation(rng, h, w, AugmentConfig())))
+    return torch.stack(grids)
 
 
-def load_grids(roots: list[Path]) -> tuple[torch.Tensor, torch.Tensor]:
-    """Every frame of ``roots`` on the gate's grid, and its label."""
+def load_grids(
+    roots: list[Path], warped: int = 0, seed: int = 0
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Every frame of ``roots`` on the gate's grid (with ``warped`` warped copies each, drawn
+    from ``seed``), and its label."""
     if not roots:
         raise ValueError("no captures given")
+    rng = np.random.default_rng(seed)
     labels = [shard_label(root) for root in roots]
-    grids = [capture_grids(root) for root in roots]
+    grids = [capture_grids(root, warped, rng) for root in roots]
     per_frame = [torch.full((len(g),), label) for g, label in zip(grids, labels, strict=True)]
     return torch.cat(grids), torch.cat(per_frame)
 
@@ -118,8 +154,9 @@ def train(args: argparse.Namespace) -> None:
     torch.manual_seed(args.seed)
     rng = np.random.default_rng(args.seed)
     t0 = time.time()
-    grids, labels = load_grids(args.data)
-    val = load_grids(args.val) if args.val else None
+    grids, labels = load_grids(args.data, args.warped, args.seed)
+    # Validation frames are warped too, from their own fixed generator.
+    val = load_grids(args.val, args.warped, args.seed + 1) if args.val else None
     n_val = 0 if val is None else len(val[0])
     print(
         f"dear-gate: {len(grids)} training frames ({labels.mean():.0%} with multi-path), "
@@ -161,6 +198,7 @@ def train(args: argparse.Namespace) -> None:
                 "data": captures_summary(args.data),
                 "val": captures_summary(args.val or []),
                 "frames": len(grids),
+                "warped_copies": args.warped,
                 "multipath_fraction": float(labels.mean()),
                 "epochs": args.epochs,
                 "batch": args.batch,
@@ -250,10 +288,22 @@ def export_gate_graph(gate: MultipathGate, channels: int, path: Path) -> None:
         )
 
 
+def as_applied(maps: np.ndarray) -> np.ndarray:
+    """``maps`` with the bias and smoothing-gate logits as the daemon's tail uses them
+    (``tanh``, ``sigmoid``). Those logits are rebuilt from ``p · tanh`` and ``p · sigmoid``:
+    where ``p`` rounds to 1 and the map saturates, one ulp of ``tanh`` moves the logit by
+    0.01 and more, and the output not at all, so the check compares what is applied."""
+    out = maps.astype(np.float64)
+    out[:, BIAS_CHANNEL] = np.tanh(out[:, BIAS_CHANNEL])
+    out[:, GATE_CHANNEL] = 1.0 / (1.0 + np.exp(-out[:, GATE_CHANNEL]))
+    return out
+
+
 def check_composed(
     original: Path, composed: Path, gate: MultipathGate, feeds: list[dict[str, np.ndarray]]
 ) -> float:
-    """Max |composed − (original maps gated in PyTorch)| over the refine graph's ``feeds``."""
+    """Max |composed − (original maps gated in PyTorch)| over the refine graph's ``feeds``,
+    compared :func:`as_applied`."""
     import onnxruntime as ort
 
     before = ort.InferenceSession(str(original), providers=["CPUExecutionProvider"])
@@ -267,7 +317,7 @@ def check_composed(
                 *(torch.from_numpy(feed[n]) for n in ("amplitude", "depth")),
                 torch.from_numpy(maps),
             ).numpy()
-        worst = max(worst, float(np.abs(got - want).max()))
+        worst = max(worst, float(np.abs(as_applied(got) - as_applied(want)).max()))
     if not worst <= CHECK_ATOL:
         raise RuntimeError(f"{composed}: differs from the gated maps by {worst:.3g} > {CHECK_ATOL}")
     return worst
@@ -325,9 +375,9 @@ def attach(args: argparse.Namespace) -> None:
     manifest["multipath_gate"] = {
         "what": "a frame-level CNN (train/dear_train/models/multipath_gate.py) inside refine.onnx: "
         f"the refine inputs averaged onto a {GRID[0]}x{GRID[1]} grid give p, the probability "
-        "that the frame has multi-path; the maps are then scaled by p: tanh(maps[9]) and "
-        "sigmoid(maps[10]) become p times themselves, maps[12] becomes maps[12] + 2 log(p) "
-        "(gate_maps in that file)",
+        "that the frame has multi-path; the maps are then scaled by p: tanh(maps[9]) becomes "
+        f"p times itself, sigmoid(maps[10]) ({SMOOTHING_FLOOR} + {1 - SMOOTHING_FLOOR} p) "
+        "times itself, maps[12] becomes maps[12] + 2 log(p) (gate_maps in that file)",
         "params": param_count(gate),
         "recipe": ckpt.get("recipe", {}),
         "last_epoch": history[-1] if history else None,
@@ -399,6 +449,12 @@ def main(argv: list[str] | None = None) -> None:
     t.add_argument("--lr", type=float, default=1e-3)
     t.add_argument("--width", type=int, default=16)
     t.add_argument("--seed", type=int, default=0)
+    t.add_argument(
+        "--warped",
+        type=int,
+        default=1,
+        help="warped copies of every frame, in random views as the refiner trains (default 1)",
+    )
     a = sub.add_parser("attach", help="append a trained gate to a bundle's refine graph")
     a.add_argument("--bundle", type=Path, required=True, help="bundle directory (edited)")
     a.add_argument("--gate", type=Path, required=True, help="gate.pt from `dear-gate train`")

@@ -13,13 +13,15 @@ import pytest
 import torch
 
 from dear_train import gate as cli
-from dear_train.data.capture import CaptureError
+from dear_train.data.capture import Capture, CaptureError
 from dear_train.data.synthetic import write_synthetic_capture
 from dear_train.export import export_bundle
+from dear_train.geometry import Calibration
 from dear_train.models.multipath_gate import (
     BIAS_CHANNEL,
     EPS,
     GATE_CHANNEL,
+    SMOOTHING_FLOOR,
     TRUST_CHANNEL,
     MultipathGate,
     gate_maps,
@@ -37,20 +39,27 @@ def test_an_open_gate_keeps_the_maps_and_a_closed_one_stops_the_correction() -> 
         assert torch.allclose(f(opened[:, channel]), f(maps[:, channel]), atol=2e-6)
     assert torch.equal(opened[:, TRUST_CHANNEL], maps[:, TRUST_CHANNEL])
     closed = gate_maps(maps, torch.zeros(2, 1, 1, 1))
-    # No bias, no smoothing, and the classical estimate only where it finds a jump.
+    # No bias, a little of the smoothing, and the classical estimate only where it finds a
+    # jump.
     assert torch.tanh(closed[:, BIAS_CHANNEL]).abs().max() <= 2 * EPS
-    assert torch.sigmoid(closed[:, GATE_CHANNEL]).max() <= 2 * EPS
+    assert torch.allclose(
+        torch.sigmoid(closed[:, GATE_CHANNEL]),
+        SMOOTHING_FLOOR * torch.sigmoid(maps[:, GATE_CHANNEL]),
+        atol=1e-5,
+    )
     shift = closed[:, TRUST_CHANNEL] - maps[:, TRUST_CHANNEL]
     assert torch.allclose(shift, torch.full_like(shift, 2 * float(np.log(EPS))), atol=1e-4)
     untouched = [c for c in range(13) if c not in (BIAS_CHANNEL, GATE_CHANNEL, TRUST_CHANNEL)]
     assert torch.equal(closed[:, untouched], maps[:, untouched])
-    # In between: the bias and the smoothing scale with p.
+    # In between: the bias scales with p, the smoothing from its floor up.
     half = gate_maps(maps, torch.full((2, 1, 1, 1), 0.5))
     assert torch.allclose(
         torch.tanh(half[:, BIAS_CHANNEL]), 0.5 * torch.tanh(maps[:, BIAS_CHANNEL]), atol=1e-5
     )
     assert torch.allclose(
-        torch.sigmoid(half[:, GATE_CHANNEL]), 0.5 * torch.sigmoid(maps[:, GATE_CHANNEL]), atol=1e-5
+        torch.sigmoid(half[:, GATE_CHANNEL]),
+        (SMOOTHING_FLOOR + 0.5 * (1 - SMOOTHING_FLOOR)) * torch.sigmoid(maps[:, GATE_CHANNEL]),
+        atol=1e-5,
     )
 
 
@@ -156,7 +165,8 @@ def test_attach_refuses_a_refiner_without_a_bias_map(
 
 
 def labelled_capture(root: Path, bounces: int | None, seed: int) -> Path:
-    write_synthetic_capture(root, frames=4, seed=seed)
+    """Aligned frames, as `dear-synth family` renders them, labelled as its shards are."""
+    write_synthetic_capture(root, frames=4, seed=seed, misaligned_fraction=0.0)
     path = root / "capture.json"
     doc = json.loads(path.read_text())
     if bounces is not None:
@@ -195,3 +205,23 @@ def test_training_writes_a_gate_that_attach_and_score_take(
     assert (
         json.loads((bundle / "model.json").read_text())["multipath_gate"]["recipe"]["epochs"] == 2
     )
+
+
+def test_warped_copies_move_the_frame_into_an_rgb_view_and_need_aligned_frames(
+    tmp_path: Path,
+) -> None:
+    root = labelled_capture(tmp_path / "aligned", 3, 4)
+    aligned = cli.capture_grids(root)
+    grids = cli.capture_grids(root, 2, np.random.default_rng(0))
+    # Every frame as it is, then two warped copies of each.
+    assert grids.shape == (3 * len(aligned), *aligned.shape[1:])
+    assert torch.equal(grids[: len(aligned)], aligned)
+    capture = Capture(root)
+    # The identity view is the frame itself; a view drawn by the augmentation moves it.
+    assert torch.allclose(cli.frame_inputs(capture, 0, Calibration()), aligned[0], atol=1e-6)
+    for copy in grids[len(aligned) :: len(aligned)]:
+        assert (copy - aligned[0]).abs().max() > 1e-3
+    misaligned = tmp_path / "misaligned"
+    write_synthetic_capture(misaligned, frames=2, seed=5, misaligned_fraction=1.0)
+    with pytest.raises(CaptureError, match=f"{misaligned}: frame 0: a warped copy needs"):
+        cli.capture_grids(misaligned, 1, np.random.default_rng(0))
