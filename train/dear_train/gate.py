@@ -108,14 +108,15 @@ def capture_grids(
     capture = Capture(root)
     if len(capture) == 0:
         raise ValueError(f"{root}: no frames")
-    if warped and rng is None:
-        raise ValueError("warped copies need a random generator")
     grids = [frame_inputs(capture, i) for i in range(len(capture))]
-    for _ in range(warped):
-        for i in range(len(capture)):
-            assert rng is not None
-            h, w = capture.size
-            grids.append(frame_inputs(capture, i, draw_perturbation(rng, h, w, AugmentConfig())))
+    if warped:
+        if rng is None:
+            raise ValueError("warped copies need a random generator")
+        h, w = capture.size
+        for _ in range(warped):
+            for i in range(len(capture)):
+                view = draw_perturbation(rng, h, w, AugmentConfig())
+                grids.append(frame_inputs(capture, i, view))
     return torch.stack(grids)
 
 
