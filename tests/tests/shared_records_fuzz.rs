@@ -8,6 +8,8 @@
 //! `DEAR_FUZZ_RUNS` (default 1,000) and `DEAR_FUZZ_SEED` (default 1) run it longer or
 //! differently; docs/security.md gives the figures of a run.
 
+use std::path::Path;
+
 use dear_e2e_tests::shared_records::Harness;
 use iceoryx2::prelude::*;
 use rand::{Rng, SeedableRng};
@@ -81,4 +83,23 @@ fn random_writes_into_the_shared_records_cannot_crash_or_stall_the_publisher() {
     let subscriber = service.subscriber_builder().create().unwrap();
     publisher.send_copy(42).unwrap();
     assert_eq!(subscriber.receive().unwrap().map(|s| *s), Some(42));
+}
+
+/// Inputs the guided fuzzer (`fuzz/`) crashed on, kept in `fuzz/regressions/shared_records`:
+/// each must now run through, each in a fresh harness as libFuzzer ran it.
+#[test]
+fn the_inputs_the_fuzzer_crashed_on_run_through() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/regressions/shared_records");
+    let mut inputs: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .collect();
+    inputs.sort();
+    assert!(!inputs.is_empty(), "{}: no inputs", dir.display());
+    for input in inputs {
+        let root = tempfile::tempdir().unwrap();
+        let mut harness = Harness::new(root.path());
+        eprintln!("{}", input.display());
+        harness.run(&std::fs::read(&input).unwrap());
+    }
 }

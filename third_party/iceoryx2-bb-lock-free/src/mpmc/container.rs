@@ -375,9 +375,11 @@ impl<T: Copy + Debug> Container<T> {
                 // MUST HAPPEN BEFORE copy_nonoverlapping
                 // if it fails, we lost the race and `Self::remove` or `Self::recover()`
                 // have set the element to empty.
+                // DEAR PATCH: wrapping: the counter lives in memory another process may
+                // overwrite (u64::MAX panicked here in builds with overflow checks).
                 let _dont_care = element_generation_counter.compare_exchange(
                     current_element_generation_counter,
-                    current_element_generation_counter + 1,
+                    current_element_generation_counter.wrapping_add(1),
                     Ordering::AcqRel,
                     Ordering::Acquire,
                 );
@@ -522,9 +524,11 @@ impl<T: Copy + Debug> Container<T> {
                 // * index is already released and could be acquired by `Self::add()`
                 // * `Self::add()` increments counter to % 2 == 1 when finished populating data
                 // * when this comes after without case, the element is set to empty
+                // DEAR PATCH: wrapping, as in `add` (a client's bytes can make it u64::MAX;
+                // found by the shared_records fuzz target).
                 let _dont_care = element_generation_counter.compare_exchange(
                     current_element_generation_counter,
-                    current_element_generation_counter + 1,
+                    current_element_generation_counter.wrapping_add(1),
                     Ordering::Relaxed,
                     Ordering::Relaxed,
                 );
