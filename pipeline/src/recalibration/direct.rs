@@ -788,8 +788,9 @@ fn mean_flow_change(level: &Level, a: &Theta, b: &Theta) -> f64 {
     }
 }
 
-/// The best `keep` of `fits` (sorted best first) whose flows differ by more than 1 px (full resolution) on average
-/// from every better one kept: fits that converged to one basin are refined once.
+/// The best `keep` of `fits` (sorted best first) within `margin` of the best correlation
+/// whose flows differ on average by more than 1 px (full resolution) from every better one
+/// kept: fits that converged to one basin are refined once.
 fn distinct_fits(
     level: &Level,
     fits: Vec<(Theta, f64)>,
@@ -1502,8 +1503,8 @@ mod tests {
         assert_eq!(fit.calibration, reference);
     }
 
-    /// A fit that explains the frame better but moves the flow further than
-    /// [`DirectFitParams::max_mean_flow_change_px`] is refused; within it, taken.
+    /// Fits carried from the coarsest level: best first, one per basin, none beyond the
+    /// margin, at most `keep`.
     #[test]
     fn fits_carried_down_the_pyramid_are_distinct_and_close_to_the_best() {
         let level = Level {
@@ -1535,6 +1536,8 @@ mod tests {
         assert_eq!(cx(distinct_fits(&level, fits, 1, 1.0)), [0.0]);
     }
 
+    /// A fit that explains the frame better but moves the flow further than
+    /// [`DirectFitParams::max_mean_flow_change_px`] is refused; within it, taken.
     #[test]
     fn a_fit_beyond_the_flow_change_limit_is_refused() {
         let truth = Calibration {
