@@ -30,7 +30,7 @@ import torch
 import torch.nn.functional as F
 
 from dear_train.augmentation import AugmentConfig, augment, draw_perturbation
-from dear_train.data.capture import Capture, CaptureError
+from dear_train.data.capture import Capture, CaptureError, Frame
 from dear_train.data.dataset import Normalisation, normalize_amplitude
 from dear_train.export import CHECK_ATOL, OPSET, check_inputs, sha256
 from dear_train.geometry import Calibration, warp_bilinear_np, warp_depth_np
@@ -72,28 +72,36 @@ def shard_label(root: Path) -> float:
     return 1.0 if bounces > 1 else 0.0
 
 
-def frame_inputs(capture: Capture, index: int, view: Calibration | None = None) -> torch.Tensor:
-    """Frame ``index`` as the refine graph gets it, on the gate's grid ``(2, 60, 80)``: depth and
-    the bundles' amplitude normalisation, warped into the RGB view of the misalignment ``view``
-    as the daemon warps them (depth discontinuity-aware, amplitude bilinear), or as they are
-    when ``view`` is None. A view needs an aligned frame with ground-truth depth."""
-    frame = capture.load(index)
+def refine_inputs(frame: Frame) -> tuple[np.ndarray, np.ndarray]:
+    """``(amplitude, depth)`` of ``frame`` as the refine graph gets them before the warp: the
+    bundles' amplitude normalisation, depth in metres with masked pixels 0."""
     depth = frame.depth.copy()
     if frame.mask is not None:
         depth[~frame.mask] = 0.0
     amplitude = normalize_amplitude(frame.amplitude, depth, Normalisation().amplitude_percentile)
-    if view is not None:
-        if frame.gt_depth is None or frame.perturbation != Calibration():
-            raise CaptureError(
-                f"{capture.root}: frame {index}: a warped copy needs an aligned frame with "
-                "ground-truth depth (a `dear-synth family` shard)"
-            )
-        synthesized = augment(frame.rgb, frame.gt_depth, view)
-        # Zero flow where the view has no ground truth, as the refiner's training feeds it.
-        u = np.where(synthesized.valid, synthesized.flow_u, 0.0)
-        v = np.where(synthesized.valid, synthesized.flow_v, 0.0)
-        depth = warp_depth_np(depth, u, v)
-        amplitude, _ = warp_bilinear_np(amplitude, u, v)
+    return amplitude, depth
+
+
+def warped_inputs(
+    frame: Frame, amplitude: np.ndarray, depth: np.ndarray, view: Calibration, name: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`refine_inputs` warped into the RGB view of the misalignment ``view`` as the daemon
+    warps them (depth discontinuity-aware, amplitude bilinear). ``frame`` (``name`` in errors)
+    must be an aligned frame with ground-truth depth."""
+    if frame.gt_depth is None or frame.perturbation != Calibration():
+        raise CaptureError(
+            f"{name}: a warped copy needs an aligned frame with ground-truth depth (a "
+            "`dear-synth family` shard)"
+        )
+    synthesized = augment(frame.rgb, frame.gt_depth, view)
+    # Zero flow where the view has no ground truth, as the refiner's training feeds it.
+    u = np.where(synthesized.valid, synthesized.flow_u, 0.0)
+    v = np.where(synthesized.valid, synthesized.flow_v, 0.0)
+    return warp_bilinear_np(amplitude, u, v)[0], warp_depth_np(depth, u, v)
+
+
+def on_grid(amplitude: np.ndarray, depth: np.ndarray) -> torch.Tensor:
+    """Refine inputs on the gate's grid, ``(2, 60, 80)``."""
     t = lambda a: torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32))[None, None]  # noqa: E731
     return pool_inputs(t(amplitude), t(depth))[0]
 
@@ -104,19 +112,26 @@ def capture_grids(
     """Every frame of the capture ``root`` on the gate's grid, then ``warped`` copies of each
     in views drawn by the refiner's augmentation (:func:`draw_perturbation`) from ``rng``:
     ``((1 + warped)·frames, 2, 60, 80)``. The daemon refines depth warped into the RGB view,
-    and a gate that saw only aligned frames gives warped multi-path frames a lower ``p``."""
+    and a gate that saw only aligned frames gives warped multi-path frames a lower ``p``.
+    Each frame is read once; with copies, the frames are kept until they are made."""
     capture = Capture(root)
     if len(capture) == 0:
         raise ValueError(f"{root}: no frames")
-    grids = [frame_inputs(capture, i) for i in range(len(capture))]
-    if warped:
-        if rng is None:
-            raise ValueError("warped copies need a random generator")
-        h, w = capture.size
-        for _ in range(warped):
-            for i in range(len(capture)):
-                view = draw_perturbation(rng, h, w, AugmentConfig())
-                grids.append(frame_inputs(capture, i, view))
+    if warped and rng is None:
+        raise ValueError("warped copies need a random generator")
+    grids, kept = [], []
+    for i in range(len(capture)):
+        frame = capture.load(i)
+        inputs = refine_inputs(frame)
+        grids.append(on_grid(*inputs))
+        if warped:
+            kept.append((frame, inputs))
+    h, w = capture.size
+    for _ in range(warped):
+        assert rng is not None
+        for i, (frame, inputs) in enumerate(kept):
+            view = draw_perturbation(rng, h, w, AugmentConfig())
+            grids.append(on_grid(*warped_inputs(frame, *inputs, view, f"{root}: frame {i}")))
     return torch.stack(grids)
 
 

@@ -218,7 +218,9 @@ def test_warped_copies_move_the_frame_into_an_rgb_view_and_need_aligned_frames(
     assert torch.equal(grids[: len(aligned)], aligned)
     capture = Capture(root)
     # The identity view is the frame itself; a view drawn by the augmentation moves it.
-    assert torch.allclose(cli.frame_inputs(capture, 0, Calibration()), aligned[0], atol=1e-6)
+    frame = capture.load(0)
+    identity = cli.warped_inputs(frame, *cli.refine_inputs(frame), Calibration(), "frame 0")
+    assert torch.allclose(cli.on_grid(*identity), aligned[0], atol=1e-6)
     for copy in grids[len(aligned) :: len(aligned)]:
         assert (copy - aligned[0]).abs().max() > 1e-3
     misaligned = tmp_path / "misaligned"
