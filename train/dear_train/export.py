@@ -38,7 +38,7 @@ from dear_train.models.dear import DEAR
 from dear_train.models.flownetc import FlowNetC
 from dear_train.models.fusion import FusionNet
 from dear_train.models.kpn import RefineNet, uses_rgb
-from dear_train.onnx_passes import subsample_strided_depthwise
+from dear_train.onnx_passes import subpixel_transposed_conv, subsample_strided_depthwise
 from dear_train.training.checkpoint import load, load_model
 from dear_train.training.config import Profile
 
@@ -317,8 +317,9 @@ def export_graph(module: nn.Module, inputs: tuple, spec: dict, path: Path) -> No
         )
     model = onnx.load(str(path), load_external_data=False)
     onnx.checker.check_model(model)
-    # Same outputs, faster in tract (its strided depthwise kernel is slow): dear_train.onnx_passes.
-    if subsample_strided_depthwise(model):
+    # Same outputs, faster in tract (its strided depthwise and transposed convolutions are
+    # slow): dear_train.onnx_passes.
+    if subsample_strided_depthwise(model) + subpixel_transposed_conv(model):
         onnx.save(model, str(path))
     ops = {n.op_type for n in model.graph.node}
     if "GridSample" in ops:

@@ -1,4 +1,5 @@
-"""dear_train.onnx_passes: the strided-depthwise rewrite keeps every output value."""
+"""dear_train.onnx_passes: the strided-depthwise rewrite keeps every output value, the
+sub-pixel rewrite of transposed convolutions every value up to float summation order."""
 
 from pathlib import Path
 
@@ -8,7 +9,7 @@ import onnxruntime as ort
 import torch
 from torch import nn
 
-from dear_train.onnx_passes import subsample_strided_depthwise
+from dear_train.onnx_passes import subpixel_transposed_conv, subsample_strided_depthwise
 
 
 class _Net(nn.Module):
@@ -72,3 +73,54 @@ def test_a_graph_without_strided_depthwise_convolutions_is_left_alone(tmp_path: 
     nodes = len(model.graph.node)
     assert subsample_strided_depthwise(model) == 0
     assert len(model.graph.node) == nodes
+
+
+class _Decoder(nn.Module):
+    """The decoders' transposed convolutions (refine: k3 p1 output padding 1; flow and
+    fusion: k4 p1, no bias) and one the pass must leave alone (grouped)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        torch.manual_seed(1)
+        self.up3 = nn.ConvTranspose2d(6, 5, 3, stride=2, padding=1, output_padding=1)
+        self.up4 = nn.ConvTranspose2d(5, 4, 4, stride=2, padding=1, bias=False)
+        self.grouped = nn.ConvTranspose2d(4, 4, 4, stride=2, padding=1, groups=2)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.grouped(torch.relu(self.up4(torch.relu(self.up3(x)))))
+
+
+def test_transposed_convolutions_become_phase_convolutions_with_the_same_outputs(
+    tmp_path: Path,
+) -> None:
+    before = tmp_path / "before.onnx"
+    torch.onnx.export(
+        _Decoder().eval(),
+        (torch.rand(1, 6, 8, 12),),
+        str(before),
+        input_names=["x"],
+        output_names=["y"],
+        dynamic_axes={"x": {2: "H", 3: "W"}, "y": {2: "h", 3: "w"}},
+        opset_version=17,
+        dynamo=False,
+    )
+    model = onnx.load(str(before))
+    assert subpixel_transposed_conv(model) == 2  # not the grouped one
+    assert [n.op_type for n in model.graph.node].count("ConvTranspose") == 1
+    assert [n.op_type for n in model.graph.node].count("DepthToSpace") == 2
+    # The replaced weights are gone, so the file does not carry both.
+    names = {i.name for i in model.graph.initializer}
+    assert not any(n.startswith(("up3.", "up4.")) for n in names), names
+    after = tmp_path / "after.onnx"
+    onnx.save(model, str(after))
+    a = ort.InferenceSession(str(before), providers=["CPUExecutionProvider"])
+    b = ort.InferenceSession(str(after), providers=["CPUExecutionProvider"])
+    rng = np.random.default_rng(5)
+    for h, w in [(8, 12), (7, 9), (1, 1), (16, 5)]:
+        x = rng.standard_normal((1, 6, h, w), dtype=np.float32)
+        (want,) = a.run(None, {"x": x})
+        (got,) = b.run(None, {"x": x})
+        assert got.shape == want.shape == (1, 4, 8 * h, 8 * w)
+        # Same products summed in another order: float rounding only.
+        assert np.abs(got - want).max() <= 1e-5 * max(1.0, np.abs(want).max()), (h, w)
+    assert subpixel_transposed_conv(model) == 0
