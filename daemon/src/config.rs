@@ -68,6 +68,13 @@ pub fn validate_log_filter(filter: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// Default `[capture] queue_depth`. A queue only fills while processing is behind, so its depth
+/// adds no latency to a stream the daemon keeps up with; at 640×480 and 30 fps on two cores
+/// (frame path, PNG decoding and the background measurement keep them about 90 % busy) bursts
+/// of slow frames overflowed a queue of 2: `scripts/replay_drops.sh` dropped 6–15 of 3,000
+/// frames with 2, 0–1 with 4 (docs/performance.md). Each waiting frame is a full RGB-D frame
+/// (3.4 MB at 640×480).
+pub const DEFAULT_QUEUE_DEPTH: usize = 4;
 /// Largest `[capture] queue_depth`: a few frames absorb jitter; a longer queue only adds memory
 /// and latency (each waiting frame is a full RGB-D frame).
 pub const MAX_QUEUE_DEPTH: usize = 64;
@@ -249,7 +256,7 @@ impl Default for CaptureConfig {
             loop_: false,
             start: 0,
             end: None,
-            queue_depth: 2,
+            queue_depth: DEFAULT_QUEUE_DEPTH,
             v4l: None,
             record: None,
         }

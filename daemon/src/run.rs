@@ -132,6 +132,12 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
     )?;
     let publisher = FramePublisher::new(&transport, &service, width, height)?;
     let mut processor = Processor::from_config(width, height, calibration, &config.pipeline)?;
+    // Before the source starts: a paced replay's clock and a camera's frames start with it.
+    match processor.warm_up() {
+        Ok(took) => tracing::info!(ms = took.as_secs_f64() * 1e3, "frame path warmed up"),
+        // The same failure would come with the first frame, which is skipped and counted then.
+        Err(e) => tracing::warn!(error = %e, "the frame path failed on the warm-up frame"),
+    }
     let overflow = match config.capture.pacing {
         Pacing::Timestamps => Overflow::DropOldest,
         Pacing::Fast => Overflow::Block,

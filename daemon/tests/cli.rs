@@ -43,7 +43,7 @@ fn print_config_shows_defaults_and_flag_overrides() {
         "flag overrides file"
     );
     assert_eq!(
-        config.capture.queue_depth, 2,
+        config.capture.queue_depth, 4,
         "unset keys keep their defaults"
     );
 }
