@@ -170,7 +170,16 @@ impl FramePublisher {
                 source,
             })?;
         transport_guard::survive_truncated_records();
-        let ports = open_ports(&config, &root, name, layout)?;
+        let ports = match open_ports(&config, &root, name, layout) {
+            Err(PublisherError::Publisher {
+                source:
+                    iceoryx2::port::publisher::PublisherCreateError::ExceedsMaxSupportedPublishers,
+                ..
+            }) if take_back_from_other_users(&config, &root, name)? => {
+                open_ports(&config, &root, name, layout)?
+            }
+            opened => opened?,
+        };
         let record_names = ports.records.clone();
         refuse_a_second_publisher(&root, &ports.frames, ports.publisher.id(), name)?;
         let run_id = dear_proto::random_run_id().map_err(|source| PublisherError::RunId {
@@ -562,6 +571,96 @@ fn log_cleanup(state: iceoryx2::node::CleanupState, when: &str) {
     }
 }
 
+/// The publishers of `frames` other than `own`: each one's pid (as text) and the user it runs
+/// as (the owner of its node's directory under the root), when known.
+fn other_publishers(
+    root: &std::path::Path,
+    frames: &FrameService,
+    own: Option<iceoryx2::identifiers::UniquePublisherId>,
+) -> Vec<(String, Option<u32>)> {
+    use std::os::unix::fs::MetadataExt;
+    let mut others = Vec::new();
+    frames.dynamic_config().list_publishers(|details| {
+        if Some(details.publisher_id) != own {
+            let pid = details
+                .node_id
+                .pid::<Transport>()
+                .map(|pid| pid.value().to_string())
+                .unwrap_or_else(|_| "unknown".into());
+            let node_dir = root.join("nodes").join(details.node_id.value().to_string());
+            let uid = std::fs::symlink_metadata(&node_dir).map(|m| m.uid()).ok();
+            others.push((pid, uid));
+        }
+        CallbackProgression::Continue
+    });
+    others
+}
+
+/// The user the service belongs to: the owner of the root (clients trust its publishers and
+/// root's).
+fn service_owner(root: &std::path::Path) -> Option<u32> {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata(root).map(|m| m.uid()).ok()
+}
+
+/// Issue 34 (lock-out): every publisher slot of `name` is taken, and by other users' processes
+/// only (members of the service's group who published before the daemon: their frames are
+/// refused by clients anyway). The daemon owns the root, so it removes the frame and event
+/// services' records and lets the next try make the services again without them: their ports
+/// stay mapped to the old, unlinked files, and new clients find the daemon's services.
+/// Returns whether it removed anything; `false` when a publisher is the service user's own or
+/// root's (a second deard: refused as before) or of unknown owner.
+fn take_back_from_other_users(
+    config: &Config,
+    root: &std::path::Path,
+    name: &str,
+) -> Result<bool, PublisherError> {
+    let node = NodeBuilder::new()
+        .config(config)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Transport>()
+        .map_err(|source| PublisherError::Node {
+            root: config.global.root_path().to_string(),
+            source,
+        })?;
+    let frames = frame_service(&node, name)?;
+    let events = frame_event_service(&node, name)?;
+    let owner = service_owner(root);
+    let others = other_publishers(root, &frames, None);
+    let foreign =
+        |uid: &Option<u32>| matches!((uid, owner), (Some(u), Some(o)) if *u != o && *u != 0);
+    if others.is_empty() || !others.iter().all(|(_, uid)| foreign(uid)) {
+        return Ok(false);
+    }
+    let names = transport_guard::ServiceRecordNames {
+        hashes: [
+            frames.service_hash().as_str().to_string(),
+            events.service_hash().as_str().to_string(),
+        ],
+        ids: [
+            frames.unique_service_id().value(),
+            events.unique_service_id().value(),
+        ],
+    };
+    drop((frames, events, node));
+    let records = transport_guard::service_records(root, &names);
+    let held_by: Vec<String> = others
+        .iter()
+        .map(|(pid, uid)| format!("pid {pid}, uid {}", uid.unwrap_or_default()))
+        .collect();
+    tracing::warn!(service = name, publishers = ?held_by, root_owner = owner, files = ?records, "other users' processes hold every publisher slot of this service (clients refuse their frames): making the service again without them");
+    for file in &records {
+        match std::fs::remove_file(file) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => {
+                tracing::warn!(file = %file.display(), error = %e, "cannot remove a record of the service")
+            }
+        }
+    }
+    Ok(true)
+}
+
 /// One publisher per service (after the cleanup above, every other one is alive): a second
 /// daemon on the same service would interleave two streams whose frame ids and calibrations
 /// have nothing to do with each other. Two daemons starting in the same instant both see the
@@ -574,33 +673,20 @@ fn refuse_a_second_publisher(
     own: iceoryx2::identifiers::UniquePublisherId,
     name: &str,
 ) -> Result<(), PublisherError> {
-    use std::os::unix::fs::MetadataExt;
-    // The service's user: the owner of the root (clients trust its publishers and root's).
-    let owner = std::fs::metadata(root).map(|m| m.uid()).ok();
+    let owner = service_owner(root);
     let mut others = Vec::new();
-    frames.dynamic_config().list_publishers(|details| {
-        if details.publisher_id != own {
-            let pid = details
-                .node_id
-                .pid::<Transport>()
-                .map(|pid| pid.value().to_string())
-                .unwrap_or_else(|_| "unknown".into());
-            // The user it runs as: the owner of its node's directory.
-            let node_dir = root.join("nodes").join(details.node_id.value().to_string());
-            let uid = std::fs::symlink_metadata(&node_dir).map(|m| m.uid()).ok();
-            match (uid, owner) {
-                // Issue 34: a member of the service's group who publishes first. Clients
-                // refuse its frames (dear_client::ReceiveError::UntrustedPublisher), so the
-                // service is served anyway instead of being locked out.
-                (Some(uid), Some(owner)) if uid != owner && uid != 0 => {
-                    tracing::warn!(service = name, pid, uid, root_owner = owner, "another user's process publishes on this service: clients refuse its frames; serving anyway");
-                }
-                (Some(uid), _) => others.push(format!("{pid}, uid {uid}")),
-                (None, _) => others.push(pid),
+    for (pid, uid) in other_publishers(root, frames, Some(own)) {
+        match (uid, owner) {
+            // Issue 34: a member of the service's group who publishes first. Clients refuse
+            // its frames (dear_client::ReceiveError::UntrustedPublisher), so the service is
+            // served anyway instead of being locked out.
+            (Some(uid), Some(owner)) if uid != owner && uid != 0 => {
+                tracing::warn!(service = name, pid, uid, root_owner = owner, "another user's process publishes on this service: clients refuse its frames; serving anyway");
             }
+            (Some(uid), _) => others.push(format!("{pid}, uid {uid}")),
+            (None, _) => others.push(pid),
         }
-        CallbackProgression::Continue
-    });
+    }
     if others.is_empty() {
         return Ok(());
     }

@@ -342,29 +342,7 @@ fn another_users_publisher_neither_locks_out_nor_impersonates_the_daemon() {
     }
     let s = setup(NOBODY);
     let service = unique_service("impostor");
-    let mut impostor = Command::new(dear_test_support::paths::binary("dear-impostor"))
-        .arg(&service)
-        .env(dear_proto::IOX2_ROOT_ENV, &s.root)
-        .uid(NOBODY)
-        .gid(NOBODY)
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    struct Kill<'a>(&'a mut std::process::Child);
-    impl Drop for Kill<'_> {
-        fn drop(&mut self) {
-            let _ = self.0.kill();
-            let _ = self.0.wait();
-        }
-    }
-    let mut line = String::new();
-    std::io::BufRead::read_line(
-        &mut std::io::BufReader::new(impostor.stdout.take().unwrap()),
-        &mut line,
-    )
-    .unwrap();
-    assert_eq!(line.trim(), "ready");
-    let _impostor = Kill(&mut impostor);
+    let _impostor = Impostor::start(&s, &service);
 
     let mut daemon = s.daemon(&service, "deard.log");
     daemon
@@ -405,6 +383,89 @@ fn another_users_publisher_neither_locks_out_nor_impersonates_the_daemon() {
         err.contains("published by uid 65534") && err.contains("its frames are refused"),
         "{err}"
     );
+    assert!(daemon.is_running());
+}
+
+/// A `dear-impostor` publishing on a service as `nobody` (a member of the service's group in
+/// these tests), killed when dropped.
+struct Impostor(std::process::Child);
+
+impl Impostor {
+    /// Starts one and waits until it publishes.
+    fn start(s: &Setup, service: &str) -> Impostor {
+        let mut child = Command::new(dear_test_support::paths::binary("dear-impostor"))
+            .arg(service)
+            .env(dear_proto::IOX2_ROOT_ENV, &s.root)
+            .uid(NOBODY)
+            .gid(NOBODY)
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        std::io::BufRead::read_line(
+            &mut std::io::BufReader::new(child.stdout.take().unwrap()),
+            &mut line,
+        )
+        .unwrap();
+        let impostor = Impostor(child);
+        assert_eq!(line.trim(), "ready");
+        impostor
+    }
+}
+
+impl Drop for Impostor {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Defect 3 (lock-out), the rest of it: two members' publishers took both publisher slots of
+/// the service before the daemon, and the daemon could not start. Now it makes the service
+/// again without them (it owns the root), says so naming them, and serves; clients receive
+/// its frames.
+#[test]
+fn other_users_holding_every_publisher_slot_do_not_lock_the_daemon_out() {
+    if !is_root() {
+        eprintln!("not root: cannot run a publisher as another user; not checked");
+        return;
+    }
+    let s = setup(NOBODY);
+    let service = unique_service("lockout");
+    let _first = Impostor::start(&s, &service);
+    let _second = Impostor::start(&s, &service);
+
+    let mut daemon = s.daemon(&service, "deard.log");
+    let taken = daemon
+        .wait_for_log_line("hold every publisher slot", WAIT)
+        .unwrap_or_else(|| panic!("not noticed:\n{}", daemon.log_text()));
+    assert!(taken.contains("uid 65534"), "{taken}");
+    daemon
+        .wait_for_log_line("serving", WAIT)
+        .unwrap_or_else(|| panic!("deard did not serve:\n{}", daemon.log_text()));
+    let run_id = daemon
+        .wait_for_log_line("publisher instance", WAIT)
+        .unwrap()
+        .split("run_id=")
+        .nth(1)
+        .unwrap()
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .to_string();
+    let probe = Probe::spawn({
+        let mut c = Probe::command(&service, 1_000_000, Duration::ZERO);
+        c.env(dear_proto::IOX2_ROOT_ENV, &s.root);
+        c
+    });
+    for _ in 0..10 {
+        let seen = probe.next(WAIT).expect("a frame of the daemon");
+        assert_eq!(
+            format!("{:016x}", seen.run_id),
+            run_id,
+            "the daemon's frames"
+        );
+    }
     assert!(daemon.is_running());
 }
 
