@@ -154,8 +154,8 @@ typedef enum dear_status {
   DEAR_PANIC = -99,
 } dear_status;
 
-// A subscription to one frame service (opaque). Made by `dear_client_connect`, freed by
-// `dear_client_free`.
+// A subscription to one frame service (opaque). Made by `dear_client_connect` or
+// `dear_client_connect_reconnecting`, freed by `dear_client_free`.
 typedef struct dear_client dear_client;
 
 // A received frame (opaque): a borrowed view of the daemon's shared-memory sample, valid
@@ -262,6 +262,30 @@ extern "C" {
 //
 // `service` must be NULL or a NUL-terminated string; `out` NULL or valid for a write.
 enum dear_status dear_client_connect(const char *service, struct dear_client **out);
+
+// As `dear_client_connect`, for a client that keeps its stream across a damaged channel and
+// a service the daemon made again (the Rust SDK's `ReconnectingClient`): a channel that was
+// corrupted (another process wrote into its shared records), or that delivered nothing for
+// `stall_ms` milliseconds (0: the default, 3000; longer than the stream's slowest frame
+// interval), is dropped and connected again every 500 ms. Meanwhile `dear_client_wait`
+// returns `DEAR_TIMEOUT` after its timeout, as on an idle stream, and never
+// `DEAR_RECEIVE_FAILED` for a corrupted channel; a signal ends a wait early with
+// `DEAR_TIMEOUT` (not `DEAR_INTERRUPTED`). `dear_client_reconnects` counts the new channels.
+//
+// # Safety
+//
+// As `dear_client_connect`.
+enum dear_status dear_client_connect_reconnecting(const char *service,
+                                                  uint32_t stall_ms,
+                                                  struct dear_client **out);
+
+// How many times a client from `dear_client_connect_reconnecting` connected again (0 for
+// NULL and for a client from `dear_client_connect`).
+//
+// # Safety
+//
+// `client` must be NULL or a client not yet freed, used by no other thread during the call.
+uint64_t dear_client_reconnects(const struct dear_client *client);
 
 // Waits up to `timeout_ms` milliseconds for the next frame (the thread sleeps until the
 // daemon announces one; 0 only takes a queued frame) and stores it in `*out`.

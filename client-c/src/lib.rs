@@ -27,7 +27,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::time::Duration;
 
 use dear_proto::FrameHeader;
-use sdk::{Client, Frame, ReceiveError};
+use sdk::{Client, Frame, ReceiveError, ReconnectingClient};
 
 /// What a function of this library did. `DEAR_OK` and `DEAR_TIMEOUT` are not failures; every
 /// negative value is one, and `dear_last_error()` then says what failed and why.
@@ -360,10 +360,16 @@ impl dear_header {
     }
 }
 
-/// A subscription to one frame service (opaque). Made by `dear_client_connect`, freed by
-/// `dear_client_free`.
+/// A subscription to one frame service (opaque). Made by `dear_client_connect` or
+/// `dear_client_connect_reconnecting`, freed by `dear_client_free`.
 pub struct dear_client {
-    client: Client,
+    channel: Channel,
+}
+
+/// A client's channel: plain, or the SDK's reconnecting one.
+enum Channel {
+    Plain(Client),
+    Reconnecting(ReconnectingClient),
 }
 
 /// A received frame (opaque): a borrowed view of the daemon's shared-memory sample, valid
@@ -466,15 +472,84 @@ pub unsafe extern "C" fn dear_client_connect(
     service: *const c_char,
     out: *mut *mut dear_client,
 ) -> dear_status {
-    const NAME: &str = "dear_client_connect";
-    guard(NAME, || {
+    // SAFETY: the caller's promises are this function's.
+    unsafe {
+        connect("dear_client_connect", service, out, |service| {
+            Client::connect(service).map(Channel::Plain)
+        })
+    }
+}
+
+/// As `dear_client_connect`, for a client that keeps its stream across a damaged channel and
+/// a service the daemon made again (the Rust SDK's `ReconnectingClient`): a channel that was
+/// corrupted (another process wrote into its shared records), or that delivered nothing for
+/// `stall_ms` milliseconds (0: the default, 3000; longer than the stream's slowest frame
+/// interval), is dropped and connected again every 500 ms. Meanwhile `dear_client_wait`
+/// returns `DEAR_TIMEOUT` after its timeout, as on an idle stream, and never
+/// `DEAR_RECEIVE_FAILED` for a corrupted channel; a signal ends a wait early with
+/// `DEAR_TIMEOUT` (not `DEAR_INTERRUPTED`). `dear_client_reconnects` counts the new channels.
+///
+/// # Safety
+///
+/// As `dear_client_connect`.
+#[no_mangle]
+pub unsafe extern "C" fn dear_client_connect_reconnecting(
+    service: *const c_char,
+    stall_ms: u32,
+    out: *mut *mut dear_client,
+) -> dear_status {
+    // SAFETY: the caller's promises are this function's.
+    unsafe {
+        connect(
+            "dear_client_connect_reconnecting",
+            service,
+            out,
+            |service| {
+                let mut client = ReconnectingClient::connect(service)?;
+                if stall_ms > 0 {
+                    client.set_stall_timeout(Duration::from_millis(u64::from(stall_ms)));
+                }
+                Ok(Channel::Reconnecting(client))
+            },
+        )
+    }
+}
+
+/// How many times a client from `dear_client_connect_reconnecting` connected again (0 for
+/// NULL and for a client from `dear_client_connect`).
+///
+/// # Safety
+///
+/// `client` must be NULL or a client not yet freed, used by no other thread during the call.
+#[no_mangle]
+pub unsafe extern "C" fn dear_client_reconnects(client: *const dear_client) -> u64 {
+    // SAFETY: the caller promises NULL or a live client; NULL is refused by `as_ref`.
+    match unsafe { client.as_ref() }.map(|c| &c.channel) {
+        Some(Channel::Reconnecting(client)) => client.reconnects(),
+        _ => 0,
+    }
+}
+
+/// The body of the connect functions: checks the arguments, makes the channel with `make`
+/// and stores the new client in `*out` (NULL on failure).
+///
+/// # Safety
+///
+/// As `dear_client_connect`.
+unsafe fn connect(
+    name: &str,
+    service: *const c_char,
+    out: *mut *mut dear_client,
+    make: impl FnOnce(&str) -> Result<Channel, sdk::ConnectError>,
+) -> dear_status {
+    guard(name, || {
         if out.is_null() {
-            return Err(invalid(NAME, "out"));
+            return Err(invalid(name, "out"));
         }
         // SAFETY: `out` is not NULL and the caller promises it is valid for a write.
         unsafe { out.write(std::ptr::null_mut()) };
         if service.is_null() {
-            return Err(invalid(NAME, "service"));
+            return Err(invalid(name, "service"));
         }
         // SAFETY: not NULL, and the caller promises a NUL-terminated string that outlives the
         // call.
@@ -482,7 +557,7 @@ pub unsafe extern "C" fn dear_client_connect(
         let service = service.to_str().map_err(|_| {
             Failure(
                 dear_status::DEAR_INVALID_ARGUMENT,
-                format!("{NAME}: the service name {service:?} is not UTF-8"),
+                format!("{name}: the service name {service:?} is not UTF-8"),
             )
         })?;
         // As the `dear` CLI: iceoryx2's own log (stderr) only for errors unless IOX2_LOG_LEVEL
@@ -491,9 +566,9 @@ pub unsafe extern "C" fn dear_client_connect(
         LOG_LEVEL.call_once(|| {
             iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error)
         });
-        let client = Client::connect(service)
-            .map_err(|e| Failure(dear_status::DEAR_CONNECT_FAILED, chain(&e)))?;
-        let client = Box::into_raw(Box::new(dear_client { client }));
+        let channel =
+            make(service).map_err(|e| Failure(dear_status::DEAR_CONNECT_FAILED, chain(&e)))?;
+        let client = Box::into_raw(Box::new(dear_client { channel }));
         // SAFETY: as above.
         unsafe { out.write(client) };
         Ok(dear_status::DEAR_OK)
@@ -530,15 +605,20 @@ pub unsafe extern "C" fn dear_client_wait(
         }
         // SAFETY: `out` is not NULL and the caller promises it is valid for a write.
         unsafe { out.write(std::ptr::null_mut()) };
-        // SAFETY: the caller promises a live client from `dear_client_connect` (a `Box` we
-        // made) that no other thread uses now; NULL is refused by `as_ref`.
-        let Some(client) = (unsafe { client.as_ref() }) else {
+        // SAFETY: the caller promises a live client from a connect function (a `Box` we made)
+        // that no other thread uses now; NULL is refused by `as_mut`.
+        let Some(client) = (unsafe { client.as_mut() }) else {
             return Err(invalid(NAME, "client"));
         };
-        let client = &client.client;
-        let service = client.service();
         let timeout = Duration::from_millis(u64::from(timeout_ms));
-        let frame = match client.wait_interruptible(timeout) {
+        let (service, received) = match &mut client.channel {
+            Channel::Plain(client) => (
+                client.service().to_string(),
+                client.wait_interruptible(timeout),
+            ),
+            Channel::Reconnecting(client) => (client.service().to_string(), client.wait(timeout)),
+        };
+        let frame = match received {
             Ok(Some(frame)) => frame,
             Ok(None) => {
                 return Err(Failure(

@@ -298,6 +298,38 @@ static void distorted(const char *service, char **coefficients) {
     ok("distorted point cloud: the header's coefficients, every point back on its pixel");
 }
 
+/* A reconnecting client outlives its daemon: after "ready" the test kills the daemon and
+   starts another on the service; the channel stalls, is connected again, and frames come. */
+static void reconnecting(const char *service) {
+    dear_client *client = (dear_client *)0x1;
+    EXPECT_STATUS(dear_client_connect_reconnecting(NULL, 0, &client), DEAR_INVALID_ARGUMENT);
+    CHECK(client == NULL && mentions("dear_client_connect_reconnecting"), "names the function");
+    CHECK(dear_client_reconnects(NULL) == 0, "no reconnections of no client");
+    EXPECT_STATUS(dear_client_connect_reconnecting(service, 500, &client), DEAR_OK);
+    dear_frame *frame = NULL;
+    EXPECT_STATUS(dear_client_wait(client, 20000, &frame), DEAR_OK);
+    uint64_t first_run = dear_frame_header(frame)->run_id;
+    dear_frame_release(frame);
+    CHECK(dear_client_reconnects(client) == 0, "a healthy channel is kept");
+    printf("ready\n");
+    fflush(stdout);
+    /* Up to 60 s for the test to replace the daemon and for a frame of the new one. */
+    int got = 0;
+    for (int i = 0; i < 600 && !got; i++) {
+        dear_status status = dear_client_wait(client, 100, &frame);
+        CHECK(status == DEAR_OK || status == DEAR_TIMEOUT, "only frames and timeouts");
+        if (status == DEAR_OK) {
+            got = dear_frame_header(frame)->run_id != first_run;
+            dear_frame_release(frame);
+        }
+    }
+    CHECK(got, "a frame of the new daemon");
+    CHECK(dear_client_reconnects(client) >= 1, "the channel was connected again");
+    printf("reconnects: %llu\n", (unsigned long long)dear_client_reconnects(client));
+    dear_client_free(client);
+    ok("reconnecting: the stream outlives its daemon");
+}
+
 int main(int argc, char **argv) {
     if (argc == 8 && strcmp(argv[1], "distorted") == 0) {
         distorted(argv[2], argv + 3);
@@ -305,7 +337,7 @@ int main(int argc, char **argv) {
         return 0;
     }
     if (argc != 3) {
-        fprintf(stderr, "usage: %s arguments|timeout|frames|points SERVICE\n", argv[0]);
+        fprintf(stderr, "usage: %s arguments|timeout|frames|points|reconnecting SERVICE\n", argv[0]);
         return 2;
     }
     if (strcmp(argv[1], "arguments") == 0) {
@@ -316,6 +348,8 @@ int main(int argc, char **argv) {
         frames(argv[2]);
     } else if (strcmp(argv[1], "points") == 0) {
         points(argv[2]);
+    } else if (strcmp(argv[1], "reconnecting") == 0) {
+        reconnecting(argv[2]);
     } else {
         fprintf(stderr, "unknown mode %s\n", argv[1]);
         return 2;

@@ -467,3 +467,42 @@ fn frames_are_zero_copy_and_at_most_two_are_held() {
         .expect("the held-frames message");
     assert!(held.contains(&format!("{service:?}")), "{held}");
 }
+
+/// `dear_client_connect_reconnecting`: the daemon is killed and another started on the service
+/// while the C client waits; its channel stalls, is connected again, and the new daemon's
+/// frames arrive.
+#[test]
+fn a_reconnecting_client_outlives_its_daemon() {
+    iox2_root();
+    let c_api = c_program("tests/c_api.c");
+    let service = unique_service("reconnect");
+    let mut daemon = start_daemon(&service);
+    let mut child = Command::new(&c_api)
+        .args(["reconnecting", &service])
+        .env(dear_proto::IOX2_ROOT_ENV, iox2_root().join("iceoryx2"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run the C program");
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    let mut line = String::new();
+    stdout.read_line(&mut line).unwrap();
+    assert_eq!(line.trim(), "ready", "deard log:\n{}", daemon.log_text());
+    daemon.crash();
+    // Longer than the client's stall time (500 ms): its channel is given up meanwhile.
+    std::thread::sleep(Duration::from_millis(1500));
+    let second = start_daemon(&service);
+    if wait_exit(&mut child, Duration::from_secs(90)).is_none() {
+        let _ = child.kill();
+    }
+    let mut rest = String::new();
+    std::io::Read::read_to_string(&mut stdout, &mut rest).unwrap();
+    let output = child.wait_with_output().unwrap();
+    assert!(
+        output.status.success() && rest.contains("ok reconnecting: the stream outlives its daemon"),
+        "{}\nstdout:\n{rest}\nstderr:\n{}\ndeard log:\n{}",
+        output.status,
+        String::from_utf8_lossy(&output.stderr),
+        second.log_text()
+    );
+}

@@ -15,7 +15,7 @@ use std::error::Error;
 use std::time::{Duration, Instant};
 
 use dear_client::ReceiveError as ClientReceiveError;
-use dear_client::{Client, FrameHeader, Stage};
+use dear_client::{ChannelEvent, Client, FrameHeader, ReconnectingClient, Stage};
 use dear_proto::service::QOS_SUBSCRIBER_BORROWED;
 use iceoryx2::port::listener::ListenerWaitError;
 use ndarray::{ArrayView2, ArrayView3, Dimension};
@@ -542,15 +542,31 @@ impl PointCloud {
     }
 }
 
+/// A subscriber's channel: a plain client, or the SDK's reconnecting one (`reconnect=True`).
+enum Channel {
+    Plain(Client),
+    /// `RefCell`: its waits change its state, and the class's methods take `&self`.
+    Reconnecting(std::cell::RefCell<ReconnectingClient>),
+}
+
+impl Channel {
+    fn wait(&self, timeout: Duration) -> Result<Option<dear_client::Frame>, ClientReceiveError> {
+        match self {
+            Channel::Plain(client) => client.wait(timeout),
+            Channel::Reconnecting(client) => client.borrow_mut().wait(timeout),
+        }
+    }
+}
+
 /// A subscription to one `deard` frame service.
 #[pyclass(unsendable, module = "dear", name = "Subscriber")]
 struct Subscriber {
     service: String,
-    client: Option<Client>,
+    client: Option<Channel>,
 }
 
 impl Subscriber {
-    fn client(&self) -> PyResult<&Client> {
+    fn client(&self) -> PyResult<&Channel> {
         self.client.as_ref().ok_or_else(|| {
             PyValueError::new_err(format!("the subscriber of {:?} is closed", self.service))
         })
@@ -596,14 +612,59 @@ impl Subscriber {
 impl Subscriber {
     /// Subscribes to `service` under the iceoryx2 root of `$DEAR_IOX2_ROOT` (else
     /// `/dev/shm/dear`). Works whether or not the daemon runs yet. Raises `ConnectError`.
+    /// With `reconnect=True` the subscription outlives a damaged channel and a service the
+    /// daemon made again (the SDK's `ReconnectingClient`): a channel that was corrupted, or
+    /// delivered nothing for `stall_s` seconds, is dropped and connected again; meanwhile
+    /// waits time out as on an idle stream. `reconnects` and `take_events()` say what happened.
     #[new]
-    #[pyo3(signature = (service = DEFAULT_SERVICE))]
-    fn new(service: &str) -> PyResult<Self> {
-        let client = Client::connect(service).map_err(|e| ConnectError::new_err(chain(&e)))?;
+    #[pyo3(signature = (service = DEFAULT_SERVICE, *, reconnect = false, stall_s = 3.0))]
+    fn new(service: &str, reconnect: bool, stall_s: f64) -> PyResult<Self> {
+        let client = if reconnect {
+            let stall = Duration::try_from_secs_f64(stall_s)
+                .ok()
+                .filter(|d| !d.is_zero())
+                .ok_or_else(|| {
+                    PyValueError::new_err(format!(
+                        "stall_s must be a finite number > 0, not {stall_s}"
+                    ))
+                })?;
+            let mut client = ReconnectingClient::connect(service)
+                .map_err(|e| ConnectError::new_err(chain(&e)))?;
+            client.set_stall_timeout(stall);
+            Channel::Reconnecting(std::cell::RefCell::new(client))
+        } else {
+            Channel::Plain(Client::connect(service).map_err(|e| ConnectError::new_err(chain(&e)))?)
+        };
         Ok(Subscriber {
             service: service.to_string(),
             client: Some(client),
         })
+    }
+
+    /// How many times the channel was connected again (0 without `reconnect=True`).
+    #[getter]
+    fn reconnects(&self) -> u64 {
+        match &self.client {
+            Some(Channel::Reconnecting(client)) => client.borrow().reconnects(),
+            _ => 0,
+        }
+    }
+
+    /// What happened to the channel since the last call, oldest first: `("lost", reason)`
+    /// or `("connected", "")` (always empty without `reconnect=True`).
+    fn take_events(&self) -> Vec<(&'static str, String)> {
+        let Some(Channel::Reconnecting(client)) = &self.client else {
+            return Vec::new();
+        };
+        client
+            .borrow_mut()
+            .take_events()
+            .into_iter()
+            .map(|event| match event {
+                ChannelEvent::Lost { reason } => ("lost", reason),
+                ChannelEvent::Connected => ("connected", String::new()),
+            })
+            .collect()
     }
 
     /// The service name.

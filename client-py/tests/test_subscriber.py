@@ -13,6 +13,7 @@ import gc
 import itertools
 import json
 import os
+import shutil
 import subprocess
 import threading
 import time
@@ -319,3 +320,61 @@ def test_depth_matches_dear_dump(service: str, tmp_path: Path) -> None:
         np.testing.assert_array_equal(conf.astype(np.uint32) * 257, amp)
         matched += 1
     assert matched >= 2, (sorted(received), published)
+
+
+def test_reconnecting_subscriber_outlives_a_service_made_again(
+    tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`reconnect=True`: when the daemon makes its service again (here its transport's files
+    are deleted under it), the old channel delivers nothing more; the subscriber reports the
+    loss and the new channel, and receives the same daemon's frames again."""
+    require_binary(DEARD)
+    # A short path: the listener's socket under the root must fit a Unix socket address.
+    tmp_path = tmp_path_factory.mktemp("rc")
+    root = tmp_path / "iox2"
+    monkeypatch.setenv("DEAR_IOX2_ROOT", str(root))
+    name = f"test/py{os.getpid()}/reconnect"
+    log_path = tmp_path / "deard.log"
+    with log_path.open("w") as log:
+        daemon = subprocess.Popen(
+            [DEARD, "--replay", DEMO, "--loop", "--refine", "none", "--service", name],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
+    try:
+        # Connect once it serves: a client making the root beside the starting daemon can fail.
+        deadline = time.monotonic() + FIRST_FRAME_S
+        while "serving" not in log_path.read_text():
+            assert daemon.poll() is None and time.monotonic() < deadline, log_path.read_text()
+            time.sleep(0.05)
+        with pytest.raises(ValueError, match="stall_s"):
+            dear.Subscriber(name, reconnect=True, stall_s=0.0)
+        with dear.Subscriber(name, reconnect=True, stall_s=1.0) as sub:
+            first = sub.wait(FIRST_FRAME_S)
+            assert first is not None, f"no frame: {log_path.read_text()}"
+            run_id = first.header.run_id
+            first.release()
+            assert sub.take_events() == [] and sub.reconnects == 0
+            for entry in root.iterdir():
+                if entry.is_dir():
+                    shutil.rmtree(entry)
+                else:
+                    entry.unlink()
+            events: list[tuple[str, str]] = []
+            deadline = time.monotonic() + FIRST_FRAME_S
+            while ("connected", "") not in events:
+                assert time.monotonic() < deadline, f"{events}: {log_path.read_text()}"
+                frame = sub.wait(0.2)
+                if frame is not None:
+                    frame.release()
+                events += sub.take_events()
+            assert events[0][0] == "lost" and "no frame" in events[0][1], events
+            again = sub.wait(10.0)
+            assert again is not None, f"no frame after reconnecting: {log_path.read_text()}"
+            assert again.header.run_id == run_id
+            again.release()
+            assert sub.reconnects >= 1
+        assert "made the transport's files again" in log_path.read_text()
+    finally:
+        daemon.terminate()
+        daemon.wait(timeout=30)

@@ -16,6 +16,7 @@
 
 pub mod frame;
 pub mod points;
+pub mod reconnect;
 #[cfg(feature = "images")]
 pub mod save;
 pub mod sequence;
@@ -27,5 +28,6 @@ pub use dear_proto::{
 };
 pub use frame::{Frame, FrameError};
 pub use points::{PointCloud, PointCloudError, PointCloudOptions, Rays};
+pub use reconnect::{ChannelEvent, ReconnectingClient};
 pub use sequence::{SequenceStep, SequenceTracker};
 pub use subscriber::{Client, ClientError, ConnectError, ReceiveError};

@@ -172,10 +172,19 @@ class Subscriber:
     Not thread-safe: use it (and let its frames be freed) on the thread that made it.
     """
 
-    def __init__(self, service: str = "dear/cam0/frames") -> None:
-        """Connects; raises ConnectError."""
+    def __init__(
+        self, service: str = "dear/cam0/frames", *, reconnect: bool = False, stall_s: float = 3.0
+    ) -> None:
+        """Connects; raises ConnectError. With `reconnect=True` a corrupted channel, or one that
+        delivered nothing for `stall_s` seconds (a service the daemon made again), is dropped and
+        connected again; waits meanwhile time out as on an idle stream."""
     @property
     def service(self) -> str: ...
+    @property
+    def reconnects(self) -> int:
+        """How many times the channel was connected again (0 without reconnect)."""
+    def take_events(self) -> list[tuple[str, str]]:
+        """("lost", reason) and ("connected", "") since the last call, oldest first."""
     @property
     def closed(self) -> bool: ...
     def wait(self, timeout_s: float) -> Frame | None:
