@@ -78,6 +78,8 @@ pub const DEFAULT_QUEUE_DEPTH: usize = 4;
 /// Largest `[capture] queue_depth`: a few frames absorb jitter; a longer queue only adds memory
 /// and latency (each waiting frame is a full RGB-D frame).
 pub const MAX_QUEUE_DEPTH: usize = 64;
+/// Default `[service] max_subscribers_per_user`: two of the eight slots stay for other users.
+pub const DEFAULT_SUBSCRIBERS_PER_USER: usize = dear_proto::service::QOS_MAX_SUBSCRIBERS - 2;
 /// Largest `[service] max_shared_memory_mb`: 64 GiB.
 pub const MAX_SHARED_MEMORY_MB: u64 = 65_536;
 /// Longest `[runtime] stats_interval_s`: a day.
@@ -116,6 +118,11 @@ pub struct ServiceConfig {
     /// stream that needs more, or more than the transport's root directory has free, is refused
     /// at start.
     pub max_shared_memory_mb: u64,
+    /// Subscriber slots one user other than the service's own (and root) may hold, of the
+    /// service's [`dear_proto::service::QOS_MAX_SUBSCRIBERS`] (1..= that). Beyond it the
+    /// daemon removes that user's newest subscribers every second, so that one member of the
+    /// service's group cannot keep every other client out (issue 34).
+    pub max_subscribers_per_user: usize,
 }
 
 impl Default for ServiceConfig {
@@ -124,6 +131,7 @@ impl Default for ServiceConfig {
             camera: dear_proto::DEFAULT_CAMERA.to_string(),
             name: None,
             max_shared_memory_mb: 1024,
+            max_subscribers_per_user: DEFAULT_SUBSCRIBERS_PER_USER,
         }
     }
 }
@@ -441,6 +449,13 @@ impl Config {
         if !(1..=MAX_SHARED_MEMORY_MB).contains(&shm) {
             return Err(format!(
                 "[service] max_shared_memory_mb = {shm} must be within 1..={MAX_SHARED_MEMORY_MB}"
+            ));
+        }
+        let per_user = self.service.max_subscribers_per_user;
+        let slots = dear_proto::service::QOS_MAX_SUBSCRIBERS;
+        if !(1..=slots).contains(&per_user) {
+            return Err(format!(
+                "[service] max_subscribers_per_user = {per_user} must be within 1..={slots} (the service's subscriber slots)"
             ));
         }
         match (self.capture.source.as_str(), &self.capture.v4l) {

@@ -137,6 +137,9 @@ pub struct FramePublisher {
     record_names: transport_guard::ServiceRecordNames,
     /// Loans that failed in a row since the last one that succeeded ([`STARVED_LOANS`]).
     failed_loans: Cell<u32>,
+    /// Subscriber slots one user other than the service's own may hold
+    /// ([`FramePublisher::set_subscribers_per_user`]).
+    subscribers_per_user: Cell<usize>,
 }
 
 /// Failed loans in a row after which the service is made again ([`FramePublisher::check_transport`]):
@@ -198,7 +201,15 @@ impl FramePublisher {
             records: RefCell::new(RecordCheck::default()),
             failed_loans: Cell::new(0),
             record_names,
+            subscribers_per_user: Cell::new(dear_proto::service::QOS_MAX_SUBSCRIBERS),
         })
+    }
+
+    /// Limits the subscriber slots one user other than the service's own (and root) may hold
+    /// (deard's `[service] max_subscribers_per_user`); enforced by
+    /// [`check_transport`](Self::check_transport). Without a call: no limit.
+    pub fn set_subscribers_per_user(&self, limit: usize) {
+        self.subscribers_per_user.set(limit.max(1));
     }
 
     /// Checks the transport's files (called every second by the daemon): removes symbolic links
@@ -222,6 +233,13 @@ impl FramePublisher {
             // them up; left alone they fill the services' node slots and keep new clients
             // out (`ExceedsMaxNumberOfNodes`).
             log_cleanup(p.node.try_cleanup_dead_nodes(), "while serving");
+            limit_subscribers_per_user(
+                &p.frames,
+                &p._events,
+                &self.root,
+                self.subscribers_per_user.get(),
+                &self.name,
+            );
             if let Some(missing) = p.files.missing() {
                 tracing::error!(file = %missing.display(), root = %self.root.display(), service = %self.name, "a file of the transport was deleted: no new client could find the service; making it again");
             } else if let Some(why) = self.records.borrow_mut().check(p, &self.root) {
@@ -594,6 +612,62 @@ fn other_publishers(
         CallbackProgression::Continue
     });
     others
+}
+
+/// Issue 34 (defect 10): one member of the service's group could take every subscriber slot
+/// and keep every other client out. Removes the subscribers of each user other than the
+/// service's own and root beyond `limit` (the last listed go), and their nodes' listeners on
+/// the event service, logging whose. Their processes stop receiving (a reconnecting client
+/// connects again and is held to the limit again).
+fn limit_subscribers_per_user(
+    frames: &FrameService,
+    events: &FrameEventService,
+    root: &std::path::Path,
+    limit: usize,
+    name: &str,
+) {
+    use std::collections::BTreeMap;
+    use std::os::unix::fs::MetadataExt;
+    let owner = service_owner(root);
+    type Port = (
+        iceoryx2::identifiers::UniqueNodeId,
+        iceoryx2::identifiers::UniqueSubscriberId,
+    );
+    let mut by_user: BTreeMap<u32, Vec<Port>> = BTreeMap::new();
+    frames.dynamic_config().list_subscribers(|details| {
+        let node_dir = root.join("nodes").join(details.node_id.value().to_string());
+        if let Ok(uid) = std::fs::symlink_metadata(&node_dir).map(|m| m.uid()) {
+            if Some(uid) != owner && uid != 0 {
+                by_user
+                    .entry(uid)
+                    .or_default()
+                    .push((details.node_id, details.subscriber_id));
+            }
+        }
+        CallbackProgression::Continue
+    });
+    for (uid, subscribers) in by_user {
+        if subscribers.len() <= limit {
+            continue;
+        }
+        let held = subscribers.len();
+        let mut pids = Vec::new();
+        for (node, subscriber) in &subscribers[limit..] {
+            if frames
+                .dynamic_config()
+                .dear_evict_subscriber(node, *subscriber)
+            {
+                // Its node's listener too: the event service has as many slots.
+                events.dynamic_config().dear_evict_node_listeners(node);
+                pids.push(
+                    node.pid::<Transport>()
+                        .map(|pid| pid.value().to_string())
+                        .unwrap_or_else(|_| "unknown".into()),
+                );
+            }
+        }
+        tracing::warn!(service = name, uid, held, limit, removed = pids.len(), pids = ?pids, "a user held more subscriber slots than [service] max_subscribers_per_user allows: removed the newest");
+    }
 }
 
 /// The user the service belongs to: the owner of the root (clients trust its publishers and

@@ -131,6 +131,7 @@ pub fn run(config: &Config, shutdown: Arc<AtomicBool>) -> Result<Stats, RunError
         },
     )?;
     let publisher = FramePublisher::new(&transport, &service, width, height)?;
+    publisher.set_subscribers_per_user(config.service.max_subscribers_per_user);
     let mut processor = Processor::from_config(width, height, calibration, &config.pipeline)?;
     // Before the source starts: a paced replay's clock and a camera's frames start with it.
     match processor.warm_up() {

@@ -20,7 +20,7 @@ use proptest::prelude::*;
 /// The keys of each section of the real file, so that generated documents reach validation
 /// instead of stopping at "unknown key".
 const KEYS: [(&str, &[&str]); 4] = [
-    ("service", &["camera", "name"]),
+    ("service", &["camera", "name", "max_subscribers_per_user"]),
     (
         "capture",
         &[
@@ -244,6 +244,8 @@ fn check(text: &str) -> Result<(), TestCaseError> {
     let stats = Duration::try_from_secs_f64(config.runtime.stats_interval_s);
     prop_assert!(stats.is_ok(), "{config:?}");
     prop_assert!((1..=MAX_QUEUE_DEPTH).contains(&config.capture.queue_depth));
+    prop_assert!((1..=dear_proto::service::QOS_MAX_SUBSCRIBERS)
+        .contains(&config.service.max_subscribers_per_user));
     let service = config.service.service_name();
     prop_assert!(
         dear_proto::validate_service_name(&service).is_ok(),

@@ -28,6 +28,22 @@ fn start_failure(toml: &str, test: &str) -> String {
 }
 
 #[test]
+fn max_subscribers_per_user_is_bounded_by_the_services_slots() {
+    for limit in ["0", "9", "100000"] {
+        let err = rejected(&format!("[service]\nmax_subscribers_per_user = {limit}\n"));
+        assert!(
+            err.contains(&format!("max_subscribers_per_user = {limit}")) && err.contains("1..=8"),
+            "{err}"
+        );
+    }
+    for limit in [1, 6, 8] {
+        let config = accepted(&format!("[service]\nmax_subscribers_per_user = {limit}\n"));
+        assert_eq!(config.service.max_subscribers_per_user, limit);
+    }
+    assert_eq!(accepted("").service.max_subscribers_per_user, 6);
+}
+
+#[test]
 fn queue_depth_is_bounded() {
     for depth in ["0", "65", "100000", "9223372036854775807"] {
         let err = rejected(&format!("[capture]\nqueue_depth = {depth}\n"));

@@ -469,6 +469,69 @@ fn other_users_holding_every_publisher_slot_do_not_lock_the_daemon_out() {
     assert!(daemon.is_running());
 }
 
+/// Defect 10: one member of the service's group could take every subscriber slot (16 `dear
+/// watch`: 8 served, 8 refused) and keep every other client out. Now the daemon removes a
+/// user's subscribers beyond `[service] max_subscribers_per_user` (6 of the 8 slots by
+/// default) within a second, naming the user, and another user's client connects and
+/// receives.
+#[test]
+fn one_member_cannot_take_every_subscriber_slot() {
+    if !is_root() {
+        eprintln!("not root: cannot run clients as another user; not checked");
+        return;
+    }
+    let s = setup(NOBODY);
+    let service = unique_service("quota");
+    let mut daemon = s.daemon(&service, "deard.log");
+    daemon
+        .wait_for_log_line("serving", WAIT)
+        .unwrap_or_else(|| panic!("deard did not serve:\n{}", daemon.log_text()));
+    // Each probe has subscribed when it is returned.
+    let _members: Vec<Probe> = (0..dear_proto::service::QOS_MAX_SUBSCRIBERS)
+        .map(|_| s.probe(&service, NOBODY))
+        .collect();
+    // The daemon removes two of them (at one check, or over two if it checked meanwhile).
+    let removed = |log: &str| -> usize {
+        log.lines()
+            .filter(|l| l.contains("max_subscribers_per_user allows"))
+            .filter_map(|l| {
+                l.split("removed=")
+                    .nth(1)?
+                    .split_whitespace()
+                    .next()?
+                    .parse::<usize>()
+                    .ok()
+            })
+            .sum()
+    };
+    let deadline = std::time::Instant::now() + WAIT;
+    while removed(&daemon.log_text()) < 2 {
+        assert!(
+            std::time::Instant::now() < deadline && daemon.is_running(),
+            "no subscriber removed:\n{}",
+            daemon.log_text()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let log = daemon.log_text();
+    let line = log
+        .lines()
+        .find(|l| l.contains("max_subscribers_per_user allows"))
+        .unwrap();
+    assert!(
+        line.contains("uid=65534") && line.contains("limit=6"),
+        "{line}"
+    );
+    // The service's own user's client gets a slot and frames.
+    let own = Probe::spawn({
+        let mut c = Probe::command(&service, 1_000_000, Duration::ZERO);
+        c.env(dear_proto::IOX2_ROOT_ENV, &s.root);
+        c
+    });
+    receives(&own, 3, &mut daemon);
+    assert!(daemon.is_running());
+}
+
 /// A small seeded generator (SplitMix64) for the scribbles: the same seed, the same writes.
 struct Scribbler(u64);
 

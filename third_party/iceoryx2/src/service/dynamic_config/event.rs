@@ -136,6 +136,29 @@ impl<B: BagFamily> DynamicConfig<B> {
         state.for_each(|_, details| callback(details));
     }
 
+    /// DEAR PATCH: removes every listener of the node `node_id` from the service as the cleanup
+    /// of a dead node does (with `publish_subscribe::DynamicConfig::dear_evict_subscriber`: a
+    /// client of deard has one subscriber and one listener per node). The listener's own
+    /// process keeps its handle; releasing it later fails and is logged. Returns how many.
+    pub fn dear_evict_node_listeners(&self, node_id: &UniqueNodeId) -> usize {
+        let mut evicted = 0;
+        // SAFETY: the bag was initialised when the service's record was made; the evicted
+        // listener's later `remove` of its handle is refused by the index set (the index is no
+        // longer owned by its node).
+        unsafe {
+            self.listeners.recover(
+                node_id.owner_id(),
+                |registered| {
+                    let hit = registered.node_id == *node_id;
+                    evicted += usize::from(hit);
+                    hit
+                },
+                ReleaseMode::Default,
+            );
+        }
+        evicted
+    }
+
     /// Iterates over all [`Notifier`](crate::port::notifier::Notifier)s and calls the
     /// callback with the corresponding [`NotifierDetails`].
     /// The callback shall return [`CallbackProgression::Continue`] when the iteration shall

@@ -202,6 +202,36 @@ impl<B: BagFamily> DynamicConfig<B> {
         state.for_each(|_, details| callback(details));
     }
 
+    /// DEAR PATCH: removes the subscriber `subscriber_id` of the node `node_id` from the
+    /// service as the cleanup of a dead node does: its slot is free again, and publishers drop
+    /// their connection to it at their next update. For the service's owner enforcing a
+    /// per-user limit on subscriber slots (deard, issue 34). The subscriber's own process
+    /// keeps its handle: releasing it later fails (its index is no longer owned by its node)
+    /// and is logged, nothing else. Returns whether the subscriber was listed.
+    pub fn dear_evict_subscriber(
+        &self,
+        node_id: &UniqueNodeId,
+        subscriber_id: UniqueSubscriberId,
+    ) -> bool {
+        let mut evicted = false;
+        // SAFETY: the bag was initialised when the service's record was made; the evicted
+        // subscriber's later `remove` of its handle is refused by the index set (the index is
+        // no longer owned by its node), see above.
+        unsafe {
+            self.subscribers.recover(
+                node_id.owner_id(),
+                |registered| {
+                    let hit =
+                        registered.node_id == *node_id && registered.subscriber_id == subscriber_id;
+                    evicted |= hit;
+                    hit
+                },
+                ReleaseMode::Default,
+            );
+        }
+        evicted
+    }
+
     pub(crate) fn register_subscriber_id(
         &self,
         details: SubscriberDetails,
