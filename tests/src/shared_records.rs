@@ -2,15 +2,18 @@
 //! and of its stable run in the test tier (`tests/tests/shared_records_fuzz.rs`); the fuzz
 //! target includes this file by path, so both run the same code.
 //!
-//! A publisher serves a subscriber in this process, an input's bytes are written into the
-//! service's shared records — the subscriber's `*.connection` and the service's `*.dynamic`
-//! files, the ones every client may write — and the publisher then loans, sends, reclaims and
-//! updates its connections as deard's frame loop does. Nothing it reads there may crash or
-//! hang it, nor the subscriber when it is dropped (the patched iceoryx2 in third_party/ checks
-//! every offset, size and index).
+//! A publisher serves a subscriber in this process, and a notifier a listener, as deard serves
+//! a client; an input's bytes are written into the shared records every client may write —
+//! the subscriber's `*.connection`, the services' `*.dynamic` and the listener's `*.event_mgmt`
+//! (its event state, which the notifier writes into) — and the publisher then loans, sends,
+//! reclaims and updates its connections and the notifier notifies, as deard's frame loop does,
+//! and the listener drains its events. Nothing read there may crash or hang either side, nor
+//! the client's ports when they are dropped (the patched iceoryx2 in third_party/ checks every
+//! offset, size and index).
 //!
 //! Input: a sequence of writes, each `[file: u8][offset: u16 le][len: u8][bytes...]`; `file`
-//! even picks a `*.connection`, odd a `*.dynamic` (its index among them modulo their count).
+//! from 0xC0 on picks a `*.event_mgmt`, below it even a `*.connection` and odd a `*.dynamic`
+//! (the file's index among them modulo their count).
 
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
@@ -24,6 +27,7 @@ use iceoryx2::prelude::*;
 pub struct Landed {
     pub connection: u64,
     pub dynamic: u64,
+    pub event: u64,
 }
 
 /// One iceoryx2 root and a counter of runs (each run makes its own service).
@@ -69,6 +73,15 @@ impl Harness {
             .unwrap();
         let publisher = service.publisher_builder().create().unwrap();
         let subscriber = service.subscriber_builder().create().unwrap();
+        let events = node
+            .service_builder(&name.as_str().try_into().unwrap())
+            .event()
+            .max_notifiers(1)
+            .max_listeners(2)
+            .create()
+            .unwrap();
+        let notifier = events.notifier_builder().create().unwrap();
+        let listener = events.listener_builder().create().unwrap();
         for n in 0..3 {
             publisher.send_copy(n).unwrap();
         }
@@ -78,6 +91,7 @@ impl Harness {
 
         let connections = records(&self.dir, ".connection");
         let dynamic = records(&self.dir, ".dynamic");
+        let event_states = records(&self.dir, ".event_mgmt");
         let mut rest = data;
         while rest.len() >= 4 {
             let (file, at, len) = (
@@ -87,7 +101,9 @@ impl Harness {
             );
             let bytes = &rest[4..(4 + len).min(rest.len())];
             rest = &rest[(4 + len).min(rest.len())..];
-            let (pool, landed) = if file % 2 == 0 {
+            let (pool, landed) = if file >= 0xC0 {
+                (&event_states, &mut self.landed.event)
+            } else if file % 2 == 0 {
                 (&connections, &mut self.landed.connection)
             } else {
                 (&dynamic, &mut self.landed.dynamic)
@@ -108,11 +124,17 @@ impl Harness {
                     let _ = sample.write_payload(n).send();
                 }
                 let _ = publisher.update_connections();
+                let _ = notifier.notify();
             }
+            // The client's side of the event: it drains its state.
+            let _ = listener.try_wait(|_| {});
         }
         // The client's side goes too: it checks what it reads back (issue 34), and a port
         // leaked here would keep its mapping in the shared-range table, which holds 256.
         drop(kept);
+        drop(listener);
+        drop(notifier);
+        drop(events);
         drop(subscriber);
         drop(publisher);
         drop(service);

@@ -797,9 +797,21 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_the_daemon() {
         .expect("deard serves");
     let victim = s.probe(&service, NOBODY);
     receives(&victim, 5, &mut daemon);
-    let records = || [s.files(".connection"), s.files(".dynamic")].concat();
+    // The listeners' event states too (`*.event_mgmt`, which the daemon's notifier writes
+    // into every frame): before the patch, a write there made the notifier add 1 at an
+    // address of the writer's choosing (SIGSEGV in the shared_records harness).
+    let records = || {
+        [
+            s.files(".connection"),
+            s.files(".dynamic"),
+            s.files(".event_mgmt"),
+        ]
+        .concat()
+    };
     assert!(
-        !s.files(".connection").is_empty() && !s.files(".dynamic").is_empty(),
+        !s.files(".connection").is_empty()
+            && !s.files(".dynamic").is_empty()
+            && !s.files(".event_mgmt").is_empty(),
         "{:?}",
         records()
     );
@@ -809,21 +821,23 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_the_daemon() {
         assert!(ok, "{} not writable by a member: {err}", file.display());
     }
     let mut scribbler = Scribbler(seed);
-    let mut kinds = [0usize; 2];
+    let mut kinds = [0usize; 3];
     // Clients that connect again when the daemon made the service again (their old one is
-    // gone): there is always a connection to scribble on. Killed at the end.
+    // gone), or when the last listener went (a client whose channel was damaged leaves):
+    // there is always a connection and an event state to scribble on. Killed at the end.
     let mut clients = Clients::new(&s.dir);
     let mut first = Vec::new();
     for i in 0..writes {
-        if i % 20 == 19 && s.files(".connection").is_empty() {
+        if i % 20 == 19 && (s.files(".connection").is_empty() || s.files(".event_mgmt").is_empty())
+        {
             clients.start(&s.root, &service);
         }
-        // First half: the connections only (the victim's, then the clients' that came
-        // after it died); second half: the service's records too. A client scribbling on
-        // those all the time keeps any new client out (it damages each new record), but
-        // not the daemon down.
+        // First half: the clients' own records only, connections and event states (the
+        // victim's, then the clients' that came after it died); second half: the service's
+        // records too. A client scribbling on those all the time keeps any new client out
+        // (it damages each new record), but not the daemon down.
         let files = if i < writes / 2 {
-            s.files(".connection")
+            [s.files(".connection"), s.files(".event_mgmt")].concat()
         } else {
             records()
         };
@@ -832,7 +846,14 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_the_daemon() {
             continue;
         }
         let file = &files[scribbler.below(files.len())];
-        kinds[usize::from(file.to_str().unwrap().ends_with(".dynamic"))] += 1;
+        let name = file.to_str().unwrap();
+        kinds[if name.ends_with(".dynamic") {
+            1
+        } else if name.ends_with(".event_mgmt") {
+            2
+        } else {
+            0
+        }] += 1;
         let what = scribbler.scribble(file);
         if first.len() < 10 {
             first.push(what.clone());
@@ -846,14 +867,15 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_the_daemon() {
         );
     }
     assert!(
-        kinds[0] > 0 && kinds[1] > 0,
-        "writes into connections, dynamic records: {kinds:?}; the first: {first:#?}\n{}",
+        kinds.iter().all(|&k| k > 0),
+        "writes into connections, dynamic records, event states: {kinds:?}; the first: {first:#?}\n{}",
         daemon.log_text()
     );
     eprintln!(
-        "seed {seed}: {} writes into connections, {} into the services' records; the daemon made the service again {} times",
+        "seed {seed}: {} writes into connections, {} into the services' records, {} into event states; the daemon made the service again {} times",
         kinds[0],
         kinds[1],
+        kinds[2],
         daemon.log_text().matches("a client damaged the service's shared records").count()
     );
     a_fresh_client_receives(&s, &service, &mut daemon);

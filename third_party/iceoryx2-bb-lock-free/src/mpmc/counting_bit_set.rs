@@ -208,11 +208,36 @@ pub mod details {
         }
 
         #[inline(always)]
-        fn verify_init(&self, source: &str) {
-            debug_assert!(
-                self.is_memory_initialized.load(Ordering::Relaxed),
-                "Undefined behavior when calling CountingBitSet::{source} and the object is not initialized."
-            );
+        fn verify_init(&self, _source: &str) {
+            // DEAR PATCH: no debug_assert on the flag: as a listener's event state it lives in
+            // a file its client (and the service's group) may overwrite, so a cleared flag is
+            // their doing, not this process's bug; `dear_counters` decides what is used.
+        }
+
+        /// DEAR PATCH: the counters' address and count, read once from the (possibly shared
+        /// and overwritten) header, used only if they lie in the mapping that holds this set
+        /// (`crate::dear_shared`; a listener's `*.event_mgmt`, which the daemon's notifier
+        /// writes into); `None` otherwise, counted as a corruption. Before, a client that
+        /// overwrote the relocatable pointer of its own event state made the notifier add 1 at
+        /// an address of its choosing in the daemon.
+        fn dear_counters(&self) -> Option<(*const AtomicBaseType, usize)> {
+            let data_ptr = self.data_ptr.as_ptr();
+            // SAFETY: a plain read of a field; any value is a valid usize.
+            let capacity = unsafe { core::ptr::read_volatile(&self.capacity) };
+            let fits = capacity
+                .checked_mul(core::mem::size_of::<AtomicBaseType>())
+                .is_some_and(|len| {
+                    crate::dear_shared::contains(
+                        self as *const Self as usize,
+                        data_ptr as usize,
+                        len,
+                        core::mem::align_of::<AtomicBaseType>(),
+                    )
+                });
+            if !fits {
+                crate::dear_shared::note_corruption();
+            }
+            fits.then_some((data_ptr, capacity))
         }
 
         /// Returns the maximum value a bit's counter can hold.
@@ -223,22 +248,31 @@ pub mod details {
         /// Increments the counter for the bit at the given index and returns the previous count.
         pub fn set(&self, id: usize) -> u64 {
             self.verify_init("set()");
-            debug_assert!(
-                id < self.capacity(),
-                "This should never happen. Out of bounds access with index {id}."
-            );
-
-            unsafe { &(*self.data_ptr.as_ptr().add(id)) }.fetch_add(1, Ordering::Relaxed) as _
+            // DEAR PATCH: the counters are checked against the mapping, and `id` against the
+            // capacity read with them (both may have been overwritten since the caller's
+            // check); a corrupted set is left alone and reads as empty.
+            match self.dear_counters() {
+                Some((data_ptr, capacity)) if id < capacity => {
+                    // SAFETY: `id < capacity` and the `capacity` counters at `data_ptr` lie in
+                    // this set's mapping, aligned (`dear_counters`).
+                    unsafe { &(*data_ptr.add(id)) }.fetch_add(1, Ordering::Relaxed) as _
+                }
+                _ => 0,
+            }
         }
 
         /// Reset every bit in the [`CountingBitSet`] and call the provided callback for every bit
         /// that had a non-zero count.
         pub fn reset_all<F: FnMut(BitState)>(&self, mut callback: F) {
             self.verify_init("reset_all()");
+            // DEAR PATCH: see `set`.
+            let Some((data_ptr, capacity)) = self.dear_counters() else {
+                return;
+            };
 
-            for bit in 0..self.capacity {
-                let count =
-                    unsafe { (*self.data_ptr.as_ptr().add(bit)).swap(0, Ordering::Relaxed) };
+            for bit in 0..capacity {
+                // SAFETY: `bit < capacity`, checked against the mapping (`dear_counters`).
+                let count = unsafe { (*data_ptr.add(bit)).swap(0, Ordering::Relaxed) };
                 if count == 0 {
                     continue;
                 }
