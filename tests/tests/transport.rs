@@ -918,7 +918,7 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_another_client() {
         || daemon.log_text(),
     );
     let mut scribbler = Scribbler(seed);
-    let mut kinds = [0usize; 2];
+    let mut kinds = [0usize; 3];
     let mut gave_up = Vec::new();
     for i in 0..writes {
         for (status, err) in clients.ended() {
@@ -939,19 +939,32 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_another_client() {
         if clients.running() < CLIENTS {
             clients.start(&s.root, &service);
         }
-        // First half: the clients' connections only (what a receiving client reads most);
-        // second half: the service's records too (which keep new clients out while damaged).
+        // First half: the clients' own records only, connections (what a receiving client
+        // reads most) and event states (which it drains); second half: the service's records
+        // too (which keep new clients out while damaged).
         let files = if i < writes / 2 {
-            s.files(".connection")
+            [s.files(".connection"), s.files(".event_mgmt")].concat()
         } else {
-            [s.files(".connection"), s.files(".dynamic")].concat()
+            [
+                s.files(".connection"),
+                s.files(".event_mgmt"),
+                s.files(".dynamic"),
+            ]
+            .concat()
         };
         if files.is_empty() {
             std::thread::sleep(Duration::from_millis(20));
             continue;
         }
         let file = &files[scribbler.below(files.len())];
-        kinds[usize::from(file.to_str().unwrap().ends_with(".dynamic"))] += 1;
+        let name = file.to_str().unwrap();
+        kinds[if name.ends_with(".dynamic") {
+            1
+        } else if name.ends_with(".event_mgmt") {
+            2
+        } else {
+            0
+        }] += 1;
         scribbler.scribble(file);
         // Let a few frames go through the damage.
         std::thread::sleep(Duration::from_millis(10));
@@ -967,8 +980,8 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_another_client() {
         gave_up.push(err);
     }
     assert!(
-        kinds[0] > 0 && kinds[1] > 0,
-        "writes into connections, dynamic records: {kinds:?}\n{}",
+        kinds.iter().all(|&k| k > 0),
+        "writes into connections, dynamic records, event states: {kinds:?}\n{}",
         daemon.log_text()
     );
     // Frames the clients received meanwhile: they were receiving while the records changed.
@@ -976,9 +989,10 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_another_client() {
         .map(|n| count_frames(&s.dir.join(format!("client-{n}.out"))))
         .sum();
     eprintln!(
-        "seed {seed}: {} writes into connections, {} into the services' records; {} clients started, {frames} frames received, {} gave up (none crashed; {} of them told their channel was corrupted); the daemon made the service again {} times; the first to give up: {:?}",
+        "seed {seed}: {} writes into connections, {} into the services' records, {} into event states; {} clients started, {frames} frames received, {} gave up (none crashed; {} of them told their channel was corrupted); the daemon made the service again {} times; the first to give up: {:?}",
         kinds[0],
         kinds[1],
+        kinds[2],
         clients.started,
         gave_up.len(),
         gave_up.iter().filter(|e| e.contains("was corrupted")).count(),
