@@ -43,6 +43,17 @@ def require_binary(path: Path) -> None:
         )
 
 
+def start_deard(name: str, log_path: Path) -> subprocess.Popen[bytes]:
+    """`deard` replaying samples/demo in a loop on service `name`, alignment only, logging to
+    `log_path`, under this process's `DEAR_IOX2_ROOT`."""
+    with log_path.open("w") as log:
+        return subprocess.Popen(
+            [DEARD, "--replay", DEMO, "--loop", "--refine", "none", "--service", name],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+        )
+
+
 @pytest.fixture(scope="module")
 def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """A running deard on a unique service, under a private iceoryx2 root."""
@@ -53,12 +64,7 @@ def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
         # Read by every connect in this process, and inherited by the daemon and `dear dump`.
         mp.setenv("DEAR_IOX2_ROOT", str(tmp / "iox2"))
         log_path = tmp / "deard.log"
-        with log_path.open("w") as log:
-            daemon = subprocess.Popen(
-                [DEARD, "--replay", DEMO, "--loop", "--refine", "none", "--service", name],
-                stdout=log,
-                stderr=subprocess.STDOUT,
-            )
+        daemon = start_deard(name, log_path)
         try:
             with dear.Subscriber(name) as sub:
                 first = sub.wait(FIRST_FRAME_S)
@@ -335,12 +341,7 @@ def test_reconnecting_subscriber_outlives_a_service_made_again(
     monkeypatch.setenv("DEAR_IOX2_ROOT", str(root))
     name = f"test/py{os.getpid()}/reconnect"
     log_path = tmp_path / "deard.log"
-    with log_path.open("w") as log:
-        daemon = subprocess.Popen(
-            [DEARD, "--replay", DEMO, "--loop", "--refine", "none", "--service", name],
-            stdout=log,
-            stderr=subprocess.STDOUT,
-        )
+    daemon = start_deard(name, log_path)
     try:
         # Connect once it serves: a client making the root beside the starting daemon can fail.
         deadline = time.monotonic() + FIRST_FRAME_S

@@ -392,14 +392,7 @@ fn open_ports(
 ) -> Result<Ports, PublisherError> {
     transport_guard::remove_symlinks(root);
     transport_guard::repair_global_mgmt(root);
-    let node = NodeBuilder::new()
-        .config(config)
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<Transport>()
-        .map_err(|source| PublisherError::Node {
-            root: config.global.root_path().to_string(),
-            source,
-        })?;
+    let node = daemon_node(config)?;
     log_cleanup(node.try_cleanup_dead_nodes(), "at start");
     let frames = frame_service(&node, name)?;
     let events = frame_event_service(&node, name)?;
@@ -431,16 +424,7 @@ fn open_ports(
         ],
         publisher_id,
     );
-    let records = transport_guard::ServiceRecordNames {
-        hashes: [
-            frames.service_hash().as_str().to_string(),
-            events.service_hash().as_str().to_string(),
-        ],
-        ids: [
-            frames.unique_service_id().value(),
-            events.unique_service_id().value(),
-        ],
-    };
+    let records = record_names(&frames, &events);
     Ok(Ports {
         node,
         publisher,
@@ -450,6 +434,35 @@ fn open_ports(
         files,
         records,
     })
+}
+
+/// The daemon's iceoryx2 node under `config`: its signals are the daemon's own.
+fn daemon_node(config: &Config) -> Result<Node<Transport>, PublisherError> {
+    NodeBuilder::new()
+        .config(config)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<Transport>()
+        .map_err(|source| PublisherError::Node {
+            root: config.global.root_path().to_string(),
+            source,
+        })
+}
+
+/// The names of the frame and event services' records.
+fn record_names(
+    frames: &FrameService,
+    events: &FrameEventService,
+) -> transport_guard::ServiceRecordNames {
+    transport_guard::ServiceRecordNames {
+        hashes: [
+            frames.service_hash().as_str().to_string(),
+            events.service_hash().as_str().to_string(),
+        ],
+        ids: [
+            frames.unique_service_id().value(),
+            events.unique_service_id().value(),
+        ],
+    }
 }
 
 /// Issue 34: notices a client's damage to the services' shared records (`*.dynamic`, which
@@ -689,14 +702,7 @@ fn take_back_from_other_users(
     root: &std::path::Path,
     name: &str,
 ) -> Result<bool, PublisherError> {
-    let node = NodeBuilder::new()
-        .config(config)
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<Transport>()
-        .map_err(|source| PublisherError::Node {
-            root: config.global.root_path().to_string(),
-            source,
-        })?;
+    let node = daemon_node(config)?;
     let frames = frame_service(&node, name)?;
     let events = frame_event_service(&node, name)?;
     let owner = service_owner(root);
@@ -706,16 +712,7 @@ fn take_back_from_other_users(
     if others.is_empty() || !others.iter().all(|(_, uid)| foreign(uid)) {
         return Ok(false);
     }
-    let names = transport_guard::ServiceRecordNames {
-        hashes: [
-            frames.service_hash().as_str().to_string(),
-            events.service_hash().as_str().to_string(),
-        ],
-        ids: [
-            frames.unique_service_id().value(),
-            events.unique_service_id().value(),
-        ],
-    };
+    let names = record_names(&frames, &events);
     drop((frames, events, node));
     let records = transport_guard::service_records(root, &names);
     let held_by: Vec<String> = others

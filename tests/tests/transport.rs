@@ -388,7 +388,9 @@ fn another_users_publisher_neither_locks_out_nor_impersonates_the_daemon() {
 
 /// A `dear-impostor` publishing on a service as `nobody` (a member of the service's group in
 /// these tests), killed when dropped.
-struct Impostor(std::process::Child);
+struct Impostor {
+    _process: Killed,
+}
 
 impl Impostor {
     /// Starts one and waits until it publishes.
@@ -407,16 +409,11 @@ impl Impostor {
             &mut line,
         )
         .unwrap();
-        let impostor = Impostor(child);
+        let impostor = Impostor {
+            _process: Killed(child),
+        };
         assert_eq!(line.trim(), "ready");
         impostor
-    }
-}
-
-impl Drop for Impostor {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
     }
 }
 
