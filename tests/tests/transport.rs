@@ -74,6 +74,22 @@ impl Setup {
         Daemon::spawn(command, &self.dir.join(log))
     }
 
+    /// [`daemon`](Self::daemon), once it serves (its log shown if it does not).
+    fn serving_daemon(&self, service: &str, log: &str) -> Daemon {
+        let daemon = self.daemon(service, log);
+        daemon
+            .wait_for_log_line("serving", WAIT)
+            .unwrap_or_else(|| panic!("deard did not serve:\n{}", daemon.log_text()));
+        daemon
+    }
+
+    /// A client process of this user (the service's own), subscribed.
+    fn own_probe(&self, service: &str) -> Probe {
+        let mut command = Probe::command(service, 1_000_000, Duration::ZERO);
+        command.env(dear_proto::IOX2_ROOT_ENV, &self.root);
+        Probe::spawn(command)
+    }
+
     /// A client process as `uid` (with that user's group only), subscribed.
     fn probe(&self, service: &str, uid: u32) -> Probe {
         let mut command = Probe::command(service, 1_000_000, Duration::ZERO);
@@ -93,6 +109,20 @@ impl Setup {
             .filter(|p| p.to_str().unwrap().ends_with(suffix))
             .collect()
     }
+}
+
+/// The run id (16 hex digits) the daemon logged for its publisher instance.
+fn run_id_of(daemon: &Daemon) -> String {
+    daemon
+        .wait_for_log_line("publisher instance", WAIT)
+        .unwrap_or_else(|| panic!("no publisher instance:\n{}", daemon.log_text()))
+        .split("run_id=")
+        .nth(1)
+        .unwrap()
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .to_string()
 }
 
 /// Runs `program args` as `nobody` and returns whether it succeeded, and its stderr.
@@ -135,10 +165,7 @@ fn a_client_cannot_write_or_truncate_the_frames() {
     }
     let s = setup(NOBODY);
     let service = unique_service("data-segment");
-    let mut daemon = s.daemon(&service, "deard.log");
-    daemon
-        .wait_for_log_line("serving", WAIT)
-        .expect("deard serves");
+    let mut daemon = s.serving_daemon(&service, "deard.log");
     let probe = s.probe(&service, NOBODY);
     receives(&probe, 5, &mut daemon);
     let data = s.files(".data");
@@ -177,10 +204,7 @@ fn an_outsider_is_asked_whether_it_is_in_the_group() {
     }
     let s = setup(0);
     let service = unique_service("outsider");
-    let mut daemon = s.daemon(&service, "deard.log");
-    daemon
-        .wait_for_log_line("serving", WAIT)
-        .expect("deard serves");
+    let mut daemon = s.serving_daemon(&service, "deard.log");
     let mut command = Probe::command(&service, 1, Duration::ZERO);
     let out = command
         .env(dear_proto::IOX2_ROOT_ENV, &s.root)
@@ -208,10 +232,7 @@ fn a_symbolic_link_in_the_root_is_removed_not_followed() {
     std::fs::create_dir(&elsewhere).unwrap();
     std::os::unix::fs::symlink(&elsewhere, s.root.join("nodes")).unwrap();
     let service = unique_service("symlink");
-    let mut daemon = s.daemon(&service, "deard.log");
-    daemon
-        .wait_for_log_line("serving", WAIT)
-        .expect("deard serves");
+    let mut daemon = s.serving_daemon(&service, "deard.log");
     let log = daemon.log_text();
     assert!(
         log.contains("removed a symbolic link from the iceoryx2 root") && log.contains("nodes"),
@@ -225,11 +246,7 @@ fn a_symbolic_link_in_the_root_is_removed_not_followed() {
     assert!(std::fs::symlink_metadata(s.root.join("nodes"))
         .unwrap()
         .is_dir());
-    let probe = Probe::spawn({
-        let mut c = Probe::command(&service, 1_000_000, Duration::ZERO);
-        c.env(dear_proto::IOX2_ROOT_ENV, &s.root);
-        c
-    });
+    let probe = s.own_probe(&service);
     receives(&probe, 3, &mut daemon);
 
     // One swapped in while the daemon serves is removed within a second too.
@@ -255,10 +272,7 @@ fn a_symbolic_link_in_the_root_is_removed_not_followed() {
 fn junk_in_the_node_counter_is_repaired_at_start_and_while_serving() {
     let s = setup(clients_group());
     let service = unique_service("global-mgmt");
-    let mut first = s.daemon(&service, "first.log");
-    first
-        .wait_for_log_line("serving", WAIT)
-        .expect("deard serves");
+    let mut first = s.serving_daemon(&service, "first.log");
     assert!(first.terminate(WAIT).expect("stops").success());
     let counters = s.files(".global_mgmt");
     assert_eq!(counters.len(), 1, "{counters:?}");
@@ -288,11 +302,7 @@ fn junk_in_the_node_counter_is_repaired_at_start_and_while_serving() {
         },
         || daemon.log_text(),
     );
-    let probe = Probe::spawn({
-        let mut c = Probe::command(&service, 1_000_000, Duration::ZERO);
-        c.env(dear_proto::IOX2_ROOT_ENV, &s.root);
-        c
-    });
+    let probe = s.own_probe(&service);
     receives(&probe, 3, &mut daemon);
 }
 
@@ -303,10 +313,7 @@ fn junk_in_the_node_counter_is_repaired_at_start_and_while_serving() {
 fn deleted_transport_files_are_noticed_and_made_again() {
     let s = setup(clients_group());
     let service = unique_service("deleted");
-    let mut daemon = s.daemon(&service, "deard.log");
-    daemon
-        .wait_for_log_line("serving", WAIT)
-        .expect("deard serves");
+    let mut daemon = s.serving_daemon(&service, "deard.log");
     for entry in std::fs::read_dir(&s.root).unwrap().flatten() {
         let path = entry.path();
         if entry.file_type().unwrap().is_dir() {
@@ -322,11 +329,7 @@ fn deleted_transport_files_are_noticed_and_made_again() {
     daemon
         .wait_for_log_line("made the transport's files again", WAIT)
         .unwrap_or_else(|| panic!("not made again:\n{}", daemon.log_text()));
-    let probe = Probe::spawn({
-        let mut c = Probe::command(&service, 1_000_000, Duration::ZERO);
-        c.env(dear_proto::IOX2_ROOT_ENV, &s.root);
-        c
-    });
+    let probe = s.own_probe(&service);
     receives(&probe, 3, &mut daemon);
 }
 
@@ -344,30 +347,14 @@ fn another_users_publisher_neither_locks_out_nor_impersonates_the_daemon() {
     let service = unique_service("impostor");
     let _impostor = Impostor::start(&s, &service);
 
-    let mut daemon = s.daemon(&service, "deard.log");
-    daemon
-        .wait_for_log_line("serving", WAIT)
-        .unwrap_or_else(|| panic!("deard did not serve:\n{}", daemon.log_text()));
+    let mut daemon = s.serving_daemon(&service, "deard.log");
     let warning = daemon
         .wait_for_log_line("another user's process publishes on this service", WAIT)
         .unwrap();
     assert!(warning.contains("uid=65534"), "{warning}");
-    let run_id = daemon
-        .wait_for_log_line("publisher instance", WAIT)
-        .unwrap()
-        .split("run_id=")
-        .nth(1)
-        .unwrap()
-        .split_whitespace()
-        .next()
-        .unwrap()
-        .to_string();
+    let run_id = run_id_of(&daemon);
 
-    let mut probe = Probe::spawn({
-        let mut c = Probe::command(&service, 1_000_000, Duration::ZERO);
-        c.env(dear_proto::IOX2_ROOT_ENV, &s.root);
-        c
-    });
+    let mut probe = s.own_probe(&service);
     for _ in 0..20 {
         let seen = probe.next(WAIT).expect("a frame of the daemon");
         assert_eq!(
@@ -440,21 +427,8 @@ fn other_users_holding_every_publisher_slot_do_not_lock_the_daemon_out() {
     daemon
         .wait_for_log_line("serving", WAIT)
         .unwrap_or_else(|| panic!("deard did not serve:\n{}", daemon.log_text()));
-    let run_id = daemon
-        .wait_for_log_line("publisher instance", WAIT)
-        .unwrap()
-        .split("run_id=")
-        .nth(1)
-        .unwrap()
-        .split_whitespace()
-        .next()
-        .unwrap()
-        .to_string();
-    let probe = Probe::spawn({
-        let mut c = Probe::command(&service, 1_000_000, Duration::ZERO);
-        c.env(dear_proto::IOX2_ROOT_ENV, &s.root);
-        c
-    });
+    let run_id = run_id_of(&daemon);
+    let probe = s.own_probe(&service);
     for _ in 0..10 {
         let seen = probe.next(WAIT).expect("a frame of the daemon");
         assert_eq!(
@@ -479,10 +453,7 @@ fn one_member_cannot_take_every_subscriber_slot() {
     }
     let s = setup(NOBODY);
     let service = unique_service("quota");
-    let mut daemon = s.daemon(&service, "deard.log");
-    daemon
-        .wait_for_log_line("serving", WAIT)
-        .unwrap_or_else(|| panic!("deard did not serve:\n{}", daemon.log_text()));
+    let mut daemon = s.serving_daemon(&service, "deard.log");
     // Each probe has subscribed when it is returned.
     let _members: Vec<Probe> = (0..dear_proto::service::QOS_MAX_SUBSCRIBERS)
         .map(|_| s.probe(&service, NOBODY))
@@ -520,11 +491,7 @@ fn one_member_cannot_take_every_subscriber_slot() {
         "{line}"
     );
     // The service's own user's client gets a slot and frames.
-    let own = Probe::spawn({
-        let mut c = Probe::command(&service, 1_000_000, Duration::ZERO);
-        c.env(dear_proto::IOX2_ROOT_ENV, &s.root);
-        c
-    });
+    let own = s.own_probe(&service);
     receives(&own, 3, &mut daemon);
     assert!(daemon.is_running());
 }
@@ -788,10 +755,7 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_the_daemon() {
     let (writes, seed) = scribble_settings(600, 0x34);
     let s = setup(NOBODY);
     let service = unique_service("scribble");
-    let mut daemon = s.daemon(&service, "deard.log");
-    daemon
-        .wait_for_log_line("serving", WAIT)
-        .expect("deard serves");
+    let mut daemon = s.serving_daemon(&service, "deard.log");
     let victim = s.probe(&service, NOBODY);
     receives(&victim, 5, &mut daemon);
     // The listeners' event states too (`*.event_mgmt`, which the daemon's notifier writes
@@ -898,10 +862,7 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_another_client() {
     let (writes, seed) = scribble_settings(600, 0x35);
     let s = setup(NOBODY);
     let service = unique_service("scribble-clients");
-    let mut daemon = s.daemon(&service, "deard.log");
-    daemon
-        .wait_for_log_line("serving", WAIT)
-        .expect("deard serves");
+    let mut daemon = s.serving_daemon(&service, "deard.log");
     const CLIENTS: usize = 3;
     let mut clients = Clients::new(&s.dir);
     for _ in 0..CLIENTS {
@@ -1067,10 +1028,7 @@ impl Drop for Killed {
 fn dear_watch_keeps_reporting_while_its_channels_are_written_into() {
     let s = setup(clients_group());
     let service = unique_service("watch-reconnect");
-    let mut daemon = s.daemon(&service, "deard.log");
-    daemon
-        .wait_for_log_line("serving", WAIT)
-        .expect("deard serves");
+    let mut daemon = s.serving_daemon(&service, "deard.log");
     let (out, err) = (s.dir.join("watch.out"), s.dir.join("watch.err"));
     let mut watch = Killed(
         Command::new(dear_test_support::paths::binary("dear"))
@@ -1122,10 +1080,7 @@ fn dear_watch_keeps_reporting_while_its_channels_are_written_into() {
 fn dear_record_keeps_recording_while_its_channels_are_written_into() {
     let s = setup(clients_group());
     let service = unique_service("record-reconnect");
-    let mut daemon = s.daemon(&service, "deard.log");
-    daemon
-        .wait_for_log_line("serving", WAIT)
-        .expect("deard serves");
+    let mut daemon = s.serving_daemon(&service, "deard.log");
     let mcap = s.dir.join("rec.mcap");
     let (out, err) = (s.dir.join("record.out"), s.dir.join("record.err"));
     let mut record = Killed(
