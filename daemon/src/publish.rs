@@ -221,6 +221,9 @@ impl FramePublisher {
     /// are removed first, or the new node would open them again. And when no sample could be
     /// loaned for [`STARVED_LOANS`] frames in a row.
     pub fn check_transport(&self) {
+        // A check that starts after a write has finished the one before it: tests that damage
+        // the records wait for these lines to know the daemon has acted on their last write.
+        tracing::debug!("{CHECKING_TRANSPORT}");
         // A link swapped in while serving: iceoryx2 would follow it when it makes or removes
         // a node's directory (a client joining or a dead one cleaned up).
         transport_guard::remove_symlinks(&self.root);
@@ -380,6 +383,9 @@ impl FramePublisher {
         }
     }
 }
+
+/// What [`FramePublisher::check_transport`] logs (at debug level) as each check starts.
+pub const CHECKING_TRANSPORT: &str = "checking the transport's files";
 
 /// Makes the node, the services and the ports under `root`: symbolic links in the root are
 /// removed first and a damaged node counter repaired ([`transport_guard`]), and the data

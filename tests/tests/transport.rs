@@ -65,12 +65,15 @@ fn setup(group: u32) -> Setup {
 }
 
 impl Setup {
-    /// A looping replay, served until the test ends.
+    /// A looping replay, served until the test ends; its transport checks logged
+    /// ([`transport_checked`]).
     fn daemon(&self, service: &str, log: &str) -> Daemon {
         let capture = self.capture.to_str().unwrap().to_string();
         let args = ["--refine", "none", "--loop", "--replay", &capture];
         let mut command = deard(service, &args);
-        command.env(dear_proto::IOX2_ROOT_ENV, &self.root);
+        command
+            .env(dear_proto::IOX2_ROOT_ENV, &self.root)
+            .env("RUST_LOG", "info,deard::publish=debug");
         Daemon::spawn(command, &self.dir.join(log))
     }
 
@@ -709,7 +712,32 @@ impl Drop for Clients {
 /// meanwhile is refused by the damaged records or gets no frames, and connects again, as after
 /// any restart of the service. Each try is a whole client run: 3 frames or a 5 s timeout, a
 /// second after the last; then a client receives 10 frames in a row.
+/// Waits until the daemon has finished every transport check it started before now and two
+/// more: damage a client wrote before the call is then acted on (a service made again is made
+/// by the second check that sees the damage), and a client connecting afterwards is not cut off
+/// by a late repair. Panics with the log if the checks stop.
+fn transport_checked(daemon: &Daemon) {
+    let checks = || {
+        daemon
+            .log_text()
+            .matches(deard::publish::CHECKING_TRANSPORT)
+            .count()
+    };
+    // The check under way may have read the records before the last write landed; the next
+    // one sees the damage, the one after repairs it, and the third starts after that.
+    let target = checks() + 3;
+    wait_until(
+        "the daemon's transport checks after the last write",
+        WAIT,
+        || checks() >= target,
+        || daemon.log_text(),
+    );
+}
+
+/// After writes into the transport's files: once the daemon has acted on them
+/// ([`transport_checked`]), a fresh client of the group connects and keeps receiving.
 fn a_fresh_client_receives(s: &Setup, service: &str, daemon: &mut Daemon) {
+    transport_checked(daemon);
     let mut refused = Vec::new();
     let served = (0..10).any(|_| {
         // A client that connects again waits a little first (the daemon checks every second).
