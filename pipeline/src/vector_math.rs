@@ -38,6 +38,23 @@ pub(crate) fn exp_fast(x: f32) -> f32 {
     f32::from_bits(shifted.to_bits().wrapping_add(127) << 23) * p
 }
 
+/// `ln x` to about 10⁻⁶ absolute error for normal, positive, finite `x` (anything else gives an
+/// unspecified value): `x = 2^k · m` with `m` in `[1, 2)` from the bits, and
+/// `ln m = 2·atanh(t)`, `t = (m − 1)/(m + 1)` in `[0, ⅓)`, by its odd series to `t⁹`.
+#[cfg_attr(not(feature = "inference"), allow(dead_code))]
+#[inline(always)]
+pub(crate) fn ln_fast(x: f32) -> f32 {
+    let bits = x.to_bits();
+    // The biased exponent is below 255 for finite x: an integer conversion, which vectorises.
+    let k = ((bits >> 23) & 0xff) as i32 - 127;
+    let m = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
+    let t = (m - 1.0) / (m + 1.0);
+    let t2 = t * t;
+    let series =
+        t * (2.0 + t2 * (2.0 / 3.0 + t2 * (2.0 / 5.0 + t2 * (2.0 / 7.0 + t2 * (2.0 / 9.0)))));
+    k as f32 * std::f32::consts::LN_2 + series
+}
+
 /// `⌊c⌋` for `0 ≤ c < 2²²` without a float-to-integer conversion (which the compiler converts
 /// one lane at a time): `c + 1.5·2²³` rounds `c` to the nearest integer, held in the low bits
 /// of the sum's representation; one less where that rounded up.
@@ -78,6 +95,26 @@ pub(crate) fn window3x3<'a>(rows: [&'a [f32]; 3]) -> [&'a [f32]; 9] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ln_fast_matches_std() {
+        for i in 0..=20_000 {
+            // 1e-6 to 1e6, and every binade's ends.
+            let x = 10f32.powf(-6.0 + 12.0 * i as f32 / 20_000.0);
+            assert!(
+                (ln_fast(x) - x.ln()).abs() < 2e-6,
+                "ln {x}: {} vs {}",
+                ln_fast(x),
+                x.ln()
+            );
+        }
+        for k in -20..20 {
+            let x = 2f32.powi(k);
+            for x in [x, f32::from_bits(x.to_bits() - 1)] {
+                assert!((ln_fast(x) - x.ln()).abs() < 2e-6, "ln {x}");
+            }
+        }
+    }
 
     #[test]
     fn exp_fast_matches_std() {

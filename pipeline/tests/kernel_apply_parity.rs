@@ -138,6 +138,7 @@ fn guarded_tail_matches_pytorch() {
     let errors = ErrorMaps {
         unit: common::f32_array(&doc["error_unit"]).1[0],
         log_bound: 6.0,
+        floor: None,
     };
     let kernel = kernel(&doc, Some(300.0), Some(errors));
     let refined = hybrid_tail(&maps, &depth, &classical, &kernel);

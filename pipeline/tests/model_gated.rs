@@ -93,9 +93,19 @@ fn gated_refiner_through_tract_and_the_rust_tail_equals_pytorch() {
 /// An edit of a manifest.
 type Edit = Box<dyn Fn(&mut serde_json::Value)>;
 
+/// Makes the gated manifest's `apply` a well-formed guarded one (the graph is not run).
+fn guarded(m: &mut serde_json::Value) {
+    let a = &mut m["graphs"]["refine"]["apply"];
+    a["kind"] = "guarded-kernel".into();
+    a["channels"] = 16.into();
+    a["jump_scale"] = 300.0.into();
+    a["error_unit"] = 0.001.into();
+    a["log_error_bound"] = 6.0.into();
+}
+
 #[test]
 fn malformed_apply_entries_are_refused_by_name() {
-    let cases: [(&str, Edit); 10] = [
+    let cases: [(&str, Edit); 13] = [
         (
             "apply.kind \"sharpen\"",
             Box::new(|m| m["graphs"]["refine"]["apply"]["kind"] = "sharpen".into()),
@@ -123,6 +133,29 @@ fn malformed_apply_entries_are_refused_by_name() {
                 a["kind"] = "guarded-kernel".into();
                 a["channels"] = 16.into();
                 a["jump_scale"] = 300.0.into();
+            }),
+        ),
+        (
+            "apply.error_floor belongs to \"guarded-kernel\", not \"gated-kernel\"",
+            Box::new(|m| {
+                m["graphs"]["refine"]["apply"]["error_floor"] =
+                    serde_json::json!({"scale": 1.0, "radius": 2, "cap_m": 0.16});
+            }),
+        ),
+        (
+            "apply.error_floor.radius 9 must be 1 to 8",
+            Box::new(|m| {
+                guarded(m);
+                m["graphs"]["refine"]["apply"]["error_floor"] =
+                    serde_json::json!({"scale": 1.0, "radius": 9, "cap_m": 0.16});
+            }),
+        ),
+        (
+            "apply.error_floor.cap_m 0 is not a positive number",
+            Box::new(|m| {
+                guarded(m);
+                m["graphs"]["refine"]["apply"]["error_floor"] =
+                    serde_json::json!({"scale": 1.0, "radius": 2, "cap_m": 0.0});
             }),
         ),
         (

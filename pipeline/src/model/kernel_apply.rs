@@ -18,8 +18,8 @@ use ndarray::{Array2, ArrayView2, ArrayViewMut2, Axis, CowArray, Ix2};
 use rayon::prelude::*;
 
 use crate::geometry::surface::is_valid_depth_branchless;
-use crate::model::manifest::RefineApply;
-use crate::vector_math::exp_fast;
+use crate::model::manifest::{ErrorFloor, RefineApply};
+use crate::vector_math::{exp_fast, ln_fast};
 
 /// Head channels of the gated refiner: 9 kernel logits, bias, gate, log-sharpness.
 pub const GATED_CHANNELS: usize = 12;
@@ -36,6 +36,9 @@ pub const GUARDED_CHANNELS: usize = 16;
 pub struct ErrorMaps {
     pub unit: f32,
     pub log_bound: f32,
+    /// Raises the published error where the frame is noisier than the head learnt
+    /// ([`floor_expected_error`]).
+    pub floor: Option<ErrorFloor>,
 }
 
 /// The constants of one gated refiner (from its manifest).
@@ -62,7 +65,11 @@ impl GatedKernel {
             errors: apply
                 .error_unit
                 .zip(apply.log_error_bound)
-                .map(|(unit, log_bound)| ErrorMaps { unit, log_bound }),
+                .map(|(unit, log_bound)| ErrorMaps {
+                    unit,
+                    log_bound,
+                    floor: apply.error_floor,
+                }),
         }
     }
 }
@@ -326,6 +333,95 @@ pub fn select_guarded(
                         out.iter_mut().zip(&*out_row).for_each(|(o, v)| *o = *v);
                         err.iter_mut().zip(&*err_row).for_each(|(o, v)| *o = *v);
                     }
+                }
+            },
+        );
+}
+
+/// Raises `log_error` (`ln` metres, as [`select_guarded`] leaves it) to at least
+/// `ln(min(scale · m, cap_m))`, where `m` is the mean of `|depth − classical|` (metres) over
+/// the pixels of the `(2·radius + 1)²` window (clipped at the frame's border) where both are
+/// valid; a pixel whose window has no such pixel, or whose error is not finite (no depth), is
+/// left as it is. Box sums along rows, then along columns.
+///
+/// # Panics
+/// When the three planes differ in shape, or `log_error`'s rows are not contiguous (the
+/// runner's own plane is).
+pub fn floor_expected_error(
+    depth: ArrayView2<f32>,
+    classical: ArrayView2<f32>,
+    mut log_error: ArrayViewMut2<f32>,
+    floor: &ErrorFloor,
+) {
+    let (h, w) = depth.dim();
+    assert_eq!(classical.dim(), (h, w), "classical shape");
+    assert_eq!(log_error.dim(), (h, w), "log_error shape");
+    let r = floor.radius;
+    // Per row: the window sums along the row of |d − c| (first `w` values) and of the count of
+    // valid pairs (the next `w`), as a running sum: one add and one subtract a pixel.
+    let mut row_sums = Array2::<f32>::zeros((h, 2 * w));
+    row_sums
+        .axis_iter_mut(Axis(0))
+        .into_par_iter()
+        .zip(depth.axis_iter(Axis(0)))
+        .zip(classical.axis_iter(Axis(0)))
+        .for_each_init(
+            || (vec![0.0f32; w], vec![0.0f32; w]),
+            |(diff, both), ((mut out, d), c)| {
+                let (d, c) = (contiguous(&d), contiguous(&c));
+                for (((df, b), &d), &c) in diff.iter_mut().zip(both.iter_mut()).zip(&*d).zip(&*c) {
+                    let valid = is_valid_depth_branchless(d) & is_valid_depth_branchless(c);
+                    *b = if valid { 1.0 } else { 0.0 };
+                    *df = if valid { (d - c).abs() } else { 0.0 };
+                }
+                let out = out.as_slice_mut().expect("a fresh array is contiguous");
+                let (sum, count) = out.split_at_mut(w);
+                let (mut s, mut n) = (0.0f32, 0.0f32);
+                for x in 0..r.min(w) {
+                    s += diff[x];
+                    n += both[x];
+                }
+                for x in 0..w {
+                    if x + r < w {
+                        s += diff[x + r];
+                        n += both[x + r];
+                    }
+                    if x > r {
+                        s -= diff[x - r - 1];
+                        n -= both[x - r - 1];
+                    }
+                    // The count is exact; the sum of the valid pairs is kept non-negative (a
+                    // running sum can leave a rounding residue where the window empties).
+                    sum[x] = if n > 0.5 { s.max(0.0) } else { 0.0 };
+                    count[x] = n;
+                }
+            },
+        );
+    let cap = floor.cap_m;
+    let scale = floor.scale;
+    log_error
+        .axis_iter_mut(Axis(0))
+        .into_par_iter()
+        .enumerate()
+        .for_each_init(
+            || vec![0.0f32; 2 * w],
+            |column, (y, mut errors)| {
+                column.fill(0.0);
+                let rows = y.saturating_sub(r)..(y + r + 1).min(h);
+                for row in row_sums.slice(ndarray::s![rows, ..]).rows() {
+                    let row = row.to_slice().expect("a fresh array is contiguous");
+                    column.iter_mut().zip(row).for_each(|(a, &v)| *a += v);
+                }
+                let (sum, count) = column.split_at(w);
+                let errors = errors
+                    .as_slice_mut()
+                    .expect("log_error rows are contiguous");
+                for ((e, &s), &n) in errors.iter_mut().zip(sum).zip(count) {
+                    // Selects, so the loop vectorises. A non-finite error (no depth) stays.
+                    let f = (scale * s / n.max(1.0)).min(cap);
+                    let raise = (s > 0.0) & e.is_finite() & (exp_fast(*e) < f);
+                    let ln_floor = ln_fast(f.max(f32::MIN_POSITIVE));
+                    *e = if raise { ln_floor } else { *e };
                 }
             },
         );
@@ -677,6 +773,7 @@ mod tests {
             errors: Some(ErrorMaps {
                 unit: 1e-3,
                 log_bound: 6.0,
+                floor: None,
             }),
             ..hybrid()
         };
@@ -708,6 +805,47 @@ mod tests {
         let (out, err) = run(&guarded_maps(f32::NAN, f32::NAN, f32::NAN));
         assert!(out.iter().all(|&v| v == 2.0));
         assert!(err.iter().all(|e| e.is_infinite()));
+    }
+
+    #[test]
+    fn the_error_floor_follows_the_local_disagreement_capped_and_only_raises() {
+        let floor = ErrorFloor {
+            scale: 2.0,
+            radius: 1,
+            cap_m: 0.15,
+        };
+        // 6×8: |d − c| is 1 cm in columns 0–3, 10 cm in 4–7; (0, 0) has no depth and the
+        // classical estimate is missing in rows 4–5, columns 6–7.
+        let depth = Array2::from_shape_fn((6, 8), |(y, x)| match (y, x) {
+            (0, 0) => 0.0,
+            _ => 2.0,
+        });
+        let classical = Array2::from_shape_fn((6, 8), |(y, x)| match (y, x) {
+            (4.., 6..) => 0.0,
+            (_, 0..4) => 2.01,
+            _ => 2.1,
+        });
+        let small = 0.001f32.ln();
+        let mut err = Array2::from_elem((6, 8), small);
+        err[[0, 0]] = f32::INFINITY;
+        err[[2, 1]] = 0.5f32.ln();
+        floor_expected_error(depth.view(), classical.view(), err.view_mut(), &floor);
+        let close = |y: usize, x: usize, metres: f32| (err[[y, x]] - metres.ln()).abs() < 1e-5;
+        // 2 × the window's mean: 2 cm inside the left part; a larger prediction stays.
+        assert!(close(1, 1, 0.02) && close(3, 2, 0.02), "{err:?}");
+        assert!(close(2, 1, 0.5));
+        // At the boundary: columns 2–4 (two of 1 cm, one of 10) and 3–5 (one and two).
+        assert!(close(2, 3, 2.0 * 0.12 / 3.0) && close(2, 4, 2.0 * 0.21 / 3.0));
+        // The right part: 2 × 10 cm, capped at 15.
+        assert!(close(1, 6, 0.15));
+        // (0, 1): five valid pairs in its clipped window ((0, 0) has no depth), all 1 cm.
+        assert!(close(0, 1, 0.02));
+        // (4, 6): the classical estimate is missing at six of its nine pixels; the three valid
+        // pairs are 10 cm: the cap again.
+        assert!(close(4, 6, 0.15));
+        // No depth: untouched; a window without a valid pair ((5, 7)): untouched.
+        assert!(err[[0, 0]].is_infinite());
+        assert_eq!(err[[5, 7]], small);
     }
 
     #[test]

@@ -103,6 +103,33 @@ pub struct RefineApply {
     /// `guarded-kernel` only: the error-map logits are clamped to ±this.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub log_error_bound: Option<f32>,
+    /// `guarded-kernel` only, optional: a floor under the published expected error from the
+    /// frame's own disagreement between measurement and classical estimate
+    /// ([`crate::model::kernel_apply::floor_expected_error`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_floor: Option<ErrorFloor>,
+}
+
+/// `graphs.refine.apply.error_floor`: the expected error a guarded refiner publishes is raised
+/// to at least `min(scale · mean |depth − classical|, cap_m)` metres, the mean taken over the
+/// `(2·radius + 1)²` window around the pixel where both are valid. The head learnt its errors
+/// on the training family's noise; on a noisier module (the held-out family) it predicted a
+/// third of the measured error, and the measurement's disagreement with its smoothed self is
+/// the frame's own evidence of that noise. The published depth is unchanged.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ErrorFloor {
+    /// Multiplies the window's mean |depth − classical| (metres).
+    pub scale: f32,
+    /// Half-width of the window, pixels (1 to [`ErrorFloor::MAX_RADIUS`]).
+    pub radius: usize,
+    /// The floor never exceeds this many metres: a large disagreement is structure (an edge,
+    /// multi-path), not noise, and the head's own prediction speaks for it.
+    pub cap_m: f32,
+}
+
+impl ErrorFloor {
+    /// The widest window a manifest may ask for.
+    pub const MAX_RADIUS: usize = 8;
 }
 
 /// The kinds of [`RefineApply`] this build implements.
@@ -467,6 +494,31 @@ fn check_apply(a: &RefineApply, multiple: usize) -> Result<(), String> {
             }
             _ => {}
         }
+    }
+    match (guarded, a.error_floor) {
+        (false, Some(_)) => {
+            return Err(format!(
+                "apply.error_floor belongs to \"guarded-kernel\", not {:?}",
+                a.kind
+            ))
+        }
+        (true, Some(f)) => {
+            for (name, v) in [("scale", f.scale), ("cap_m", f.cap_m)] {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(format!(
+                        "apply.error_floor.{name} {v} is not a positive number"
+                    ));
+                }
+            }
+            if !(1..=ErrorFloor::MAX_RADIUS).contains(&f.radius) {
+                return Err(format!(
+                    "apply.error_floor.radius {} must be 1 to {}",
+                    f.radius,
+                    ErrorFloor::MAX_RADIUS
+                ));
+            }
+        }
+        _ => {}
     }
     if !matches!(a.stride, 2 | 4 | 8) || !multiple.is_multiple_of(a.stride) {
         return Err(format!(

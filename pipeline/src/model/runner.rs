@@ -16,7 +16,9 @@ use tract_onnx::prelude::*;
 
 use crate::model::bundle::{LoadedGraph, ModelBundle};
 use crate::model::error::BundleError;
-use crate::model::kernel_apply::{apply_gated, blend_classical, select_guarded, GatedKernel};
+use crate::model::kernel_apply::{
+    apply_gated, blend_classical, floor_expected_error, select_guarded, GatedKernel,
+};
 use crate::model::manifest::{output_contract, GraphOutput, GraphRole};
 use dear_capture::frame::Flow;
 
@@ -241,6 +243,9 @@ impl BundleRunner {
                         apply_gated(maps, base.view(), out.view_mut(), kernel);
                         if let Some(log_error) = &mut self.log_error {
                             select_guarded(maps, depth, c, out, log_error.view_mut(), kernel);
+                            if let Some(floor) = kernel.errors.and_then(|e| e.floor) {
+                                floor_expected_error(depth, c, log_error.view_mut(), &floor);
+                            }
                         }
                     }
                     _ => apply_gated(maps, depth, out, kernel),
