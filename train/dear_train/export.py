@@ -46,6 +46,12 @@ FORMAT = "dear-model-bundle"
 OPSET = 17
 #: Largest allowed |ONNX − PyTorch| on the check inputs (flows in px, depths in m).
 CHECK_ATOL = 1e-4
+#: ``graphs.refine.apply.error_floor`` of a guarded bundle (the chain applies it; the depth is
+#: unchanged): the expected error is raised to at least ``min(scale · m, cap_m)`` metres, ``m``
+#: the mean |depth − classical| in the ``(2·radius + 1)²`` window. Chosen on validation draws
+#: no RESULTS.md table scores (``dear-synth family --family heldout --seed 9300``, 4 draws of
+#: 20 frames, and ``--family broad --seed 9100``, 8 of 10): docs/models.md, "Expected error".
+GUARDED_ERROR_FLOOR = {"scale": 1.0, "radius": 2, "cap_m": 0.16}
 
 
 class FlowGraph(nn.Module):
@@ -142,7 +148,11 @@ def refine_apply_spec(net: RefineNet) -> dict | None:
                 "error_unit * max_depth_m * exp(clamp(maps[13 + k], -log_error_bound, "
                 "log_error_bound)) for k = 0 (r), 1 (d), 2 (c); each pixel publishes the "
                 "candidate with a positive depth and the smallest e_k (ties: r, then d, then c) "
-                "and e_k as its expected error; none positive: 0"
+                "and e_k as its expected error; none positive: 0; the published error is then "
+                "raised to at least min(error_floor.scale * m, error_floor.cap_m) metres, m the "
+                "mean of |depth - classical| over the pixels of the (2 * error_floor.radius + "
+                "1)^2 window (clipped at the border) where both are positive (the depth is "
+                "unchanged)"
             )
     else:
         return None
@@ -158,6 +168,7 @@ def refine_apply_spec(net: RefineNet) -> dict | None:
     if net.variant == "guarded":
         spec["error_unit"] = kpn.GUARDED_ERROR_UNIT
         spec["log_error_bound"] = kpn.GUARDED_LOG_ERROR_BOUND
+        spec["error_floor"] = dict(GUARDED_ERROR_FLOOR)
     spec["definition"] = definition
     return spec
 
