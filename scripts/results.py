@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import re
 import shutil
 from pathlib import Path
@@ -385,6 +386,50 @@ def table_reliability(report: dict[str, Report]) -> list[str]:
                 f"{fmt(b['mean_measured_cm'])} |"
             )
         lines.append("")
+    return lines
+
+
+def reliability_score(bins: list[dict]) -> float | None:
+    """How far a row's expected errors are from the errors measured: the pixel-weighted mean of
+    |ln(mean measured / mean predicted)| over its reliability bins (0 when every bin's mean
+    prediction is its mean error, ln 2 = 0.69 when they are 2× apart); None without bins."""
+    used = [b for b in bins if b["pixels"] > 0 and b["mean_predicted_cm"] > 0]
+    used = [b for b in used if b["mean_measured_cm"] > 0]
+    pixels = sum(b["pixels"] for b in used)
+    if pixels == 0:
+        return None
+    return (
+        sum(
+            b["pixels"] * abs(math.log(b["mean_measured_cm"] / b["mean_predicted_cm"]))
+            for b in used
+        )
+        / pixels
+    )
+
+
+def table_reliability_scores(eval_dir: Path) -> list[str]:
+    """The reliability score of every expected-error row at the true calibration, per family."""
+    sets = [n for n, _ in FAMILIES if (eval_dir / n / "eval.json").is_file()]
+    reports = {n: load(eval_dir, n) for n in sets}
+    methods = sorted(
+        {
+            m
+            for r in reports.values()
+            for m, row in r.items()
+            if m != "__file__" and m.endswith("@ true calibration") and row.get("reliability")
+        }
+    )
+    if not methods:
+        return []
+    lines = [
+        "| Method | " + " | ".join(f"`{n}`" for n in sets) + " |",
+        "|---" + "|---:" * len(sets) + "|",
+    ]
+    for m in methods:
+        cells = [
+            fmt(reliability_score(reports[n].get(m, {}).get("reliability") or [])) for n in sets
+        ]
+        lines.append(f"| `{m}` | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -918,6 +963,12 @@ def main() -> None:
         *table_reliability(
             {k: v for k, v in heldout.items() if k == "__file__" or k.endswith("calibration")}
         ),
+        "The same on every family, as one number: the pixel-weighted mean of |ln(measured / "
+        "predicted)| over the bins (0 when every bin's prediction holds, 0.69 when they are 2× "
+        'apart; docs/models.md, "Expected-error floor").',
+        "",
+        *table_reliability_scores(args.eval),
+        "",
         "## Online recalibration on a drifting calibration (beyond the paper)",
         "",
         (

@@ -635,9 +635,9 @@ fn other_publishers(
 
 /// Issue 34 (defect 10): one member of the service's group could take every subscriber slot
 /// and keep every other client out. Removes the subscribers of each user other than the
-/// service's own and root beyond `limit` (the last listed go), and their nodes' listeners on
-/// the event service, logging whose. Their processes stop receiving (a reconnecting client
-/// connects again and is held to the limit again).
+/// service's own and root beyond `limit` (the last listed go: list order is slot order, not
+/// age), and their nodes' listeners on the event service, logging whose. Their processes stop
+/// receiving (a reconnecting client connects again and is held to the limit again).
 fn limit_subscribers_per_user(
     frames: &FrameService,
     events: &FrameEventService,
@@ -685,7 +685,7 @@ fn limit_subscribers_per_user(
                 );
             }
         }
-        tracing::warn!(service = name, uid, held, limit, removed = pids.len(), pids = ?pids, "a user held more subscriber slots than [service] max_subscribers_per_user allows: removed the newest");
+        tracing::warn!(service = name, uid, held, limit, removed = pids.len(), pids = ?pids, "a user held more subscriber slots than [service] max_subscribers_per_user allows: removed those beyond the limit");
     }
 }
 
