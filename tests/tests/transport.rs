@@ -707,11 +707,6 @@ impl Drop for Clients {
     }
 }
 
-/// After the scribbling stopped, a fresh client receives frames. The daemon notices damaged
-/// records within two checks (a second apart) and makes the service again; a client that came
-/// meanwhile is refused by the damaged records or gets no frames, and connects again, as after
-/// any restart of the service. Each try is a whole client run: 3 frames or a 5 s timeout, a
-/// second after the last; then a client receives 10 frames in a row.
 /// Waits until the daemon has finished every transport check it started before now and two
 /// more: damage a client wrote before the call is then acted on (a service made again is made
 /// by the second check that sees the damage), and a client connecting afterwards is not cut off
@@ -734,8 +729,13 @@ fn transport_checked(daemon: &Daemon) {
     );
 }
 
-/// After writes into the transport's files: once the daemon has acted on them
-/// ([`transport_checked`]), a fresh client of the group connects and keeps receiving.
+/// After the scribbling stopped, a fresh client receives frames. The daemon notices damaged
+/// records within two checks (a second apart) and makes the service again, so the clients start
+/// once it has acted on the last write ([`transport_checked`]; a repair that came later cut a
+/// client off mid-stream). A client that came meanwhile would be refused by the damaged records
+/// or get no frames, and connect again, as after any restart of the service. Each try is a
+/// whole client run: 3 frames or a 5 s timeout, a second after the last; then a client
+/// receives 10 frames in a row.
 fn a_fresh_client_receives(s: &Setup, service: &str, daemon: &mut Daemon) {
     transport_checked(daemon);
     let mut refused = Vec::new();

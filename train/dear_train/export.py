@@ -50,7 +50,7 @@ CHECK_ATOL = 1e-4
 #: unchanged): the expected error is raised to at least ``min(scale · m, cap_m)`` metres, ``m``
 #: the mean |depth − classical| in the ``(2·radius + 1)²`` window. Chosen on validation draws
 #: no RESULTS.md table scores (``dear-synth family --family heldout --seed 9300``, 4 draws of
-#: 20 frames, and ``--family broad --seed 9100``, 8 of 10): docs/models.md, "Expected error".
+#: 20 frames, and ``--family broad --seed 9100``, 8 of 10): docs/models.md, "Expected-error floor".
 GUARDED_ERROR_FLOOR = {"scale": 1.0, "radius": 2, "cap_m": 0.16}
 
 
