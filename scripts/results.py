@@ -393,8 +393,11 @@ def reliability_score(bins: list[dict]) -> float | None:
     """How far a row's expected errors are from the errors measured: the pixel-weighted mean of
     |ln(mean measured / mean predicted)| over its reliability bins (0 when every bin's mean
     prediction is its mean error, ln 2 = 0.69 when they are 2× apart); None without bins."""
-    used = [b for b in bins if b["pixels"] > 0 and b["mean_predicted_cm"] > 0]
-    used = [b for b in used if b["mean_measured_cm"] > 0]
+    used = [
+        b
+        for b in bins
+        if b["pixels"] > 0 and b["mean_predicted_cm"] > 0 and b["mean_measured_cm"] > 0
+    ]
     pixels = sum(b["pixels"] for b in used)
     if pixels == 0:
         return None

@@ -20,6 +20,26 @@ fn accepted(toml: &str) -> Config {
     Config::from_toml(toml).unwrap_or_else(|e| panic!("rejected {toml:?}: {e}"))
 }
 
+/// Each of `values` for `key` in `[section]` is refused, the error naming `key = value` and the
+/// allowed `range`.
+fn refused_outside(section: &str, key: &str, values: &[&str], range: &str) {
+    for value in values {
+        let err = rejected(&format!("[{section}]\n{key} = {value}\n"));
+        assert!(
+            err.contains(&format!("{key} = {value}")) && err.contains(range),
+            "{err}"
+        );
+    }
+}
+
+/// Each of `values` for `key` in `[section]` is accepted and read back as given by `read`.
+fn accepted_as_given(section: &str, key: &str, values: &[usize], read: impl Fn(&Config) -> usize) {
+    for &value in values {
+        let config = accepted(&format!("[{section}]\n{key} = {value}\n"));
+        assert_eq!(read(&config), value, "{key} = {value}");
+    }
+}
+
 /// Runs `deard` on `samples/demo` with the configuration `toml` on a service of its own
 /// (`test` names it), expecting it to fail at start-up; returns its stderr.
 fn start_failure(toml: &str, test: &str) -> String {
@@ -29,33 +49,21 @@ fn start_failure(toml: &str, test: &str) -> String {
 
 #[test]
 fn max_subscribers_per_user_is_bounded_by_the_services_slots() {
-    for limit in ["0", "9", "100000"] {
-        let err = rejected(&format!("[service]\nmax_subscribers_per_user = {limit}\n"));
-        assert!(
-            err.contains(&format!("max_subscribers_per_user = {limit}")) && err.contains("1..=8"),
-            "{err}"
-        );
-    }
-    for limit in [1, 6, 8] {
-        let config = accepted(&format!("[service]\nmax_subscribers_per_user = {limit}\n"));
-        assert_eq!(config.service.max_subscribers_per_user, limit);
-    }
+    let key = "max_subscribers_per_user";
+    refused_outside("service", key, &["0", "9", "100000"], "1..=8");
+    accepted_as_given("service", key, &[1, 6, 8], |c| {
+        c.service.max_subscribers_per_user
+    });
     assert_eq!(accepted("").service.max_subscribers_per_user, 6);
 }
 
 #[test]
 fn queue_depth_is_bounded() {
-    for depth in ["0", "65", "100000", "9223372036854775807"] {
-        let err = rejected(&format!("[capture]\nqueue_depth = {depth}\n"));
-        assert!(
-            err.contains(&format!("queue_depth = {depth}")) && err.contains("1..=64"),
-            "{err}"
-        );
-    }
-    for depth in [1, 2, 64] {
-        let config = accepted(&format!("[capture]\nqueue_depth = {depth}\n"));
-        assert_eq!(config.capture.queue_depth, depth);
-    }
+    let too_deep = ["0", "65", "100000", "9223372036854775807"];
+    refused_outside("capture", "queue_depth", &too_deep, "1..=64");
+    accepted_as_given("capture", "queue_depth", &[1, 2, 64], |c| {
+        c.capture.queue_depth
+    });
 }
 
 #[test]
@@ -201,13 +209,8 @@ fn online_network_placement_is_background_by_default_and_checked() {
 
 #[test]
 fn max_shared_memory_is_bounded_and_enforced_at_start() {
-    for mb in ["0", "65537", "18446744073709551615"] {
-        let err = rejected(&format!("[service]\nmax_shared_memory_mb = {mb}\n"));
-        assert!(
-            err.contains(&format!("max_shared_memory_mb = {mb}")) && err.contains("1..=65536"),
-            "{err}"
-        );
-    }
+    let values = ["0", "65537", "18446744073709551615"];
+    refused_outside("service", "max_shared_memory_mb", &values, "1..=65536");
     assert_eq!(accepted("").service.max_shared_memory_mb, 1024);
     // samples/demo (320x240) needs 21.5 MB: a 10 MB limit refuses it before any is taken.
     let err = start_failure(

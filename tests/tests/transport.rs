@@ -27,6 +27,16 @@ fn is_root() -> bool {
     unsafe { libc::geteuid() == 0 }
 }
 
+/// Whether this test can run `what` (clients, a publisher) as another user, which only root
+/// can; when it cannot, it says so and the test returns without checking anything.
+fn can_run_as_another_user(what: &str) -> bool {
+    let root = is_root();
+    if !root {
+        eprintln!("not root: cannot run {what} as another user; not checked");
+    }
+    root
+}
+
 /// A capture to replay and an iceoryx2 root for one test, in a directory every user may enter.
 struct Setup {
     _tmp: tempfile::TempDir,
@@ -162,8 +172,7 @@ fn receives(probe: &Probe, n: usize, daemon: &mut Daemon) {
 /// segment read-only).
 #[test]
 fn a_client_cannot_write_or_truncate_the_frames() {
-    if !is_root() {
-        eprintln!("not root: cannot run clients as another user; not checked");
+    if !can_run_as_another_user("clients") {
         return;
     }
     let s = setup(NOBODY);
@@ -201,8 +210,7 @@ fn a_client_cannot_write_or_truncate_the_frames() {
 /// or `InsufficientPermissions` (the root `0770` is visible to it but cannot be entered).
 #[test]
 fn an_outsider_is_asked_whether_it_is_in_the_group() {
-    if !is_root() {
-        eprintln!("not root: cannot run a client as another user; not checked");
+    if !can_run_as_another_user("a client") {
         return;
     }
     let s = setup(0);
@@ -342,8 +350,7 @@ fn deleted_transport_files_are_noticed_and_made_again() {
 /// (naming his uid) and receive the daemon's.
 #[test]
 fn another_users_publisher_neither_locks_out_nor_impersonates_the_daemon() {
-    if !is_root() {
-        eprintln!("not root: cannot run a publisher as another user; not checked");
+    if !can_run_as_another_user("a publisher") {
         return;
     }
     let s = setup(NOBODY);
@@ -413,8 +420,7 @@ impl Impostor {
 /// its frames.
 #[test]
 fn other_users_holding_every_publisher_slot_do_not_lock_the_daemon_out() {
-    if !is_root() {
-        eprintln!("not root: cannot run a publisher as another user; not checked");
+    if !can_run_as_another_user("a publisher") {
         return;
     }
     let s = setup(NOBODY);
@@ -450,8 +456,7 @@ fn other_users_holding_every_publisher_slot_do_not_lock_the_daemon_out() {
 /// receives.
 #[test]
 fn one_member_cannot_take_every_subscriber_slot() {
-    if !is_root() {
-        eprintln!("not root: cannot run clients as another user; not checked");
+    if !can_run_as_another_user("clients") {
         return;
     }
     let s = setup(NOBODY);
@@ -775,8 +780,7 @@ fn a_fresh_client_receives(s: &Setup, service: &str, daemon: &mut Daemon) {
 /// clients' side: [`a_client_scribbling_on_the_shared_records_cannot_crash_another_client`].)
 #[test]
 fn a_client_scribbling_on_the_shared_records_cannot_crash_the_daemon() {
-    if !is_root() {
-        eprintln!("not root: cannot run clients as another user; not checked");
+    if !can_run_as_another_user("clients") {
         return;
     }
     // Longer by hand: DEAR_SCRIBBLE_WRITES=20000 DEAR_SCRIBBLE_SEED=7 (docs/security.md).
@@ -883,8 +887,7 @@ fn a_client_scribbling_on_the_shared_records_cannot_crash_the_daemon() {
 /// afterwards.
 #[test]
 fn a_client_scribbling_on_the_shared_records_cannot_crash_another_client() {
-    if !is_root() {
-        eprintln!("not root: cannot run clients as another user; not checked");
+    if !can_run_as_another_user("clients") {
         return;
     }
     let (writes, seed) = scribble_settings(600, 0x35);
