@@ -469,7 +469,8 @@ fn the_background_worker_measures_what_a_full_frame_measures() {
 }
 
 /// The worker runs at the lowest scheduling priority (nice 19 for a caller at nice 0), so under
-/// load it takes what the frame path leaves (`background.rs` says what nice +10 cost).
+/// load it takes what the frame path leaves (`background.rs` says what nice +10 cost); so do the
+/// threads of its own rayon pool, where its parallel loops run instead of the frame path's.
 #[cfg(target_os = "linux")]
 #[test]
 fn the_background_worker_runs_at_the_lowest_priority() {
@@ -509,6 +510,29 @@ fn the_background_worker_runs_at_the_lowest_priority() {
         worker_nice,
         Some(expected),
         "the worker's nice value (caller at {own})"
+    );
+    // So do the threads of its pool, where the measurement's parallel loops run: one per
+    // thread of the caller's pool.
+    let pool_threads = rayon::current_num_threads();
+    for index in 0..pool_threads {
+        let comm = format!("{name}-{index}");
+        let nice = loop {
+            let nice = nice_of(&comm);
+            if nice == Some(expected) || std::time::Instant::now() > deadline {
+                break nice;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        };
+        assert_eq!(
+            nice,
+            Some(expected),
+            "{comm}'s nice value (caller at {own})"
+        );
+    }
+    assert_eq!(
+        nice_of(&format!("{name}-{pool_threads}")),
+        None,
+        "the pool has as many threads as the caller's"
     );
     drop(worker);
 }

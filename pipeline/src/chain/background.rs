@@ -11,7 +11,10 @@
 //!
 //! The worker runs at the lowest scheduling priority (nice +19 above the thread that calls it,
 //! capped at 19), so on a two-core board it takes what the frame path leaves instead of
-//! competing with it. With frames overlapping, the frame path keeps both cores busy when it
+//! competing with it. The measurement's parallel loops (the direct fit's candidate search and
+//! residuals, the splat) run on a rayon pool of the worker's own, as many threads as the
+//! caller's pool and each at the worker's priority: on the global pool they would run on the
+//! frame path's threads at its priority, and a frame's stages would wait behind them. With frames overlapping, the frame path keeps both cores busy when it
 //! falls behind, and at nice +10 the worker's 0.3 s measurement every 30 frames still slowed
 //! the frames around it: `deard-bench` at 640×480, 200 frames back to back, p95 82.5 / 78.6 ms
 //! and median 43.8 / 44.7 at +10 against 56.8 / 53.2 and 41.2 / 39.0 at +19 (alternating
@@ -111,14 +114,16 @@ impl<T: Send + 'static> std::fmt::Debug for BackgroundCalibrator<T> {
 
 impl<T: Send + 'static> BackgroundCalibrator<T> {
     /// Starts the worker with `chain` (built by the caller, so a bundle problem is the
-    /// caller's start-up error). `name` names the thread.
+    /// caller's start-up error). `name` names the thread; its pool's threads are named
+    /// `name` cut to 12 bytes, a dash and their index (Linux keeps 15 bytes of a name).
     ///
     /// # Errors
-    /// When the thread cannot be spawned.
+    /// When the thread or its pool's threads cannot be spawned.
     pub fn spawn(mut chain: DearChain, name: &str) -> std::io::Result<Self> {
         let (h, w) = chain.dim();
         let (job_tx, job_rx) = mpsc::sync_channel::<Job<T>>(1);
         let (done_tx, done_rx) = mpsc::sync_channel::<Done<T>>(1);
+        let pool = worker_pool(name)?;
         let thread = std::thread::Builder::new()
             .name(name.to_owned())
             .spawn(move || {
@@ -131,10 +136,12 @@ impl<T: Send + 'static> BackgroundCalibrator<T> {
                 {
                     let start = Instant::now();
                     chain.set_reference(reference);
-                    let report = chain.measure(ChainInput {
-                        rgb: planes.rgb.view(),
-                        amplitude: planes.amplitude.view(),
-                        depth: planes.depth.view(),
+                    let report = pool.install(|| {
+                        chain.measure(ChainInput {
+                            rgb: planes.rgb.view(),
+                            amplitude: planes.amplitude.view(),
+                            depth: planes.depth.view(),
+                        })
                     });
                     let done = Done {
                         ticket,
@@ -337,6 +344,19 @@ impl<T> DelayedCalibrator<T> {
     pub fn delay_frames(&self) -> NonZeroU32 {
         self.delay_frames
     }
+}
+
+/// The worker's rayon pool: as many threads as the caller's pool (`RAYON_NUM_THREADS`, or one
+/// per core, and the caller's CPU affinity, which threads inherit), each lowering its own
+/// priority as it starts.
+fn worker_pool(name: &str) -> std::io::Result<rayon::ThreadPool> {
+    let base: String = name.chars().take(12).collect();
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(rayon::current_num_threads())
+        .thread_name(move |index| format!("{base}-{index}"))
+        .start_handler(|_| lower_priority())
+        .build()
+        .map_err(std::io::Error::other)
 }
 
 /// Lowers the calling thread's scheduling priority by [`WORKER_NICE`] (Linux: the nice value
