@@ -401,6 +401,11 @@ pub struct RuntimeConfig {
     /// statistics line and at shutdown, restored at start for a stream of the same size unless
     /// `[pipeline] static_calibration` is set); none = not kept.
     pub state_file: Option<PathBuf>,
+    /// Pin each of the frame path's threads to a CPU of its own, one per CPU the daemon may
+    /// run on (or `RAYON_NUM_THREADS` of them, the first ones): steadier frame times on CPUs
+    /// the daemon has to itself, much slower frames when another process keeps one of them
+    /// busy (`dear_pipeline::threads` has the measurements).
+    pub pin_threads: bool,
 }
 
 impl Default for RuntimeConfig {
@@ -410,6 +415,7 @@ impl Default for RuntimeConfig {
             exit_when_done: false,
             log: "info".into(),
             state_file: None,
+            pin_threads: false,
         }
     }
 }

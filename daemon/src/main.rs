@@ -68,6 +68,9 @@ struct Cli {
     /// Seconds between statistics lines ([runtime] stats_interval_s).
     #[arg(long)]
     stats_interval: Option<f64>,
+    /// Pin each frame-path thread to a CPU of its own ([runtime] pin_threads).
+    #[arg(long)]
+    pin_threads: bool,
     /// Print the effective configuration as TOML and exit.
     #[arg(long)]
     print_config: bool,
@@ -143,6 +146,9 @@ fn effective_config(cli: &Cli) -> Result<Config, deard::config::ConfigError> {
     if let Some(s) = cli.stats_interval {
         config.runtime.stats_interval_s = s;
     }
+    if cli.pin_threads {
+        config.runtime.pin_threads = true;
+    }
     config.validate()?;
     Ok(config)
 }
@@ -194,6 +200,17 @@ fn main() -> ExitCode {
     // iceoryx2's warnings (a client that cannot connect) into this log.
     deard::iceoryx_log::install();
 
+    // Before anything uses rayon: its global pool is made once, by its first user.
+    if config.runtime.pin_threads {
+        match dear_pipeline::threads::pin_global_pool() {
+            Ok(cpus) => tracing::info!(?cpus, "frame path's threads pinned, one per CPU"),
+            Err(e) => {
+                report_error(&format!("[runtime] pin_threads: {}", error_chain(&e)));
+                return ExitCode::FAILURE;
+            }
+        }
+    }
+
     let shutdown = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         if let Err(e) = signal_hook::flag::register(signal, shutdown.clone()) {
@@ -204,15 +221,19 @@ fn main() -> ExitCode {
     match deard::run::run(&config, shutdown) {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
-            // Once: in the log when errors are logged (both go to stderr), else on stderr.
-            let e = error_chain(&e);
-            if tracing::enabled!(tracing::Level::ERROR) {
-                tracing::error!("{e}");
-            } else {
-                eprintln!("deard: {e}");
-            }
+            report_error(&error_chain(&e));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// A start-up or run error, said once: in the log when errors are logged (both go to stderr),
+/// else on stderr.
+fn report_error(message: &str) {
+    if tracing::enabled!(tracing::Level::ERROR) {
+        tracing::error!("{message}");
+    } else {
+        eprintln!("deard: {message}");
     }
 }
 

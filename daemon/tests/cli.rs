@@ -234,3 +234,44 @@ fn an_end_beyond_the_capture_is_logged() {
         "{err}"
     );
 }
+
+/// Issue 37: `--pin-threads` pins the frame path's threads one per CPU the daemon may run on
+/// (checked inside the daemon, which refuses to start when a pin did not take) and says which;
+/// asking for more threads than CPUs is a start-up error naming both.
+#[test]
+fn pinned_threads_serve_and_too_many_are_refused_by_name() {
+    let demo = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/demo");
+    let allowed = dear_pipeline::threads::allowed_cpus().unwrap();
+    let service = unique_service("pin-threads");
+    let run = |threads: Option<usize>| {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_deard"));
+        command
+            .args(["--replay", demo, "--pin-threads"])
+            .args(["--refine", "classical", "--pacing", "fast"])
+            .args(["--exit-when-done", "--end", "5"])
+            .args(["--service", &service])
+            .env("RUST_LOG", "info")
+            .env_remove("RAYON_NUM_THREADS");
+        if let Some(n) = threads {
+            command.env("RAYON_NUM_THREADS", n.to_string());
+        }
+        command.output().expect("run deard")
+    };
+    let out = run(None);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("frame path's threads pinned") && err.contains(&format!("cpus={allowed:?}")),
+        "{err}"
+    );
+
+    let out = run(Some(allowed.len() + 1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("pin_threads")
+            && err.contains("RAYON_NUM_THREADS")
+            && err.contains(&format!("{} frame-path threads", allowed.len() + 1)),
+        "{err}"
+    );
+}

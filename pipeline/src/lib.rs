@@ -15,7 +15,8 @@
 //! - [`engine`]: the per-frame engine deard runs with a bundle (chain, online estimator,
 //!   measurement off the frame path, output guard) and `dear eval --online` evaluates
 //!   (feature `inference`);
-//! - [`simd`]: the instruction sets the hot loops are compiled for, and which one runs.
+//! - [`simd`]: the instruction sets the hot loops are compiled for, and which one runs;
+//! - [`threads`]: the frame path's thread pool, optionally pinned one thread per CPU.
 //!
 //! The evaluation behind `dear eval` (metrics, methods and baselines, reports) is the
 //! `dear-eval` crate, which depends on this one; the runtime does not.
@@ -31,4 +32,5 @@ pub mod geometry;
 pub mod model;
 pub mod recalibration;
 pub mod simd;
+pub mod threads;
 mod vector_math;

@@ -17,27 +17,12 @@ pub const SPIN_FLAG: &str = "--spin-cpu";
 
 /// Pins the calling thread, and every thread it starts later, to `cpu`.
 pub fn pin_to(cpu: usize) -> Result<(), String> {
-    let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
-    if cpu >= libc::CPU_SETSIZE as usize {
-        return Err(format!(
-            "CPU {cpu} is beyond the CPU set's {} CPUs",
-            libc::CPU_SETSIZE
-        ));
-    }
-    // SAFETY: a zeroed cpu_set_t is the empty set; CPU_SET with an index below CPU_SETSIZE
-    // (checked above) and sched_setaffinity on the calling thread (pid 0) with its size.
-    let r = unsafe {
-        let mut set: libc::cpu_set_t = std::mem::zeroed();
-        libc::CPU_SET(cpu, &mut set);
-        libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set)
-    };
-    if r != 0 {
-        return Err(format!(
-            "cannot pin to CPU {cpu}: {} (this process may use {cpus} CPUs; `nproc` lists them)",
-            std::io::Error::last_os_error()
-        ));
-    }
-    Ok(())
+    dear_pipeline::threads::pin_current_thread(cpu).map_err(|e| {
+        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+        format!(
+            "cannot pin to CPU {cpu}: {e} (this process may use {cpus} CPUs; `nproc` lists them)"
+        )
+    })
 }
 
 /// `deard-bench --spin-cpu N`: pins itself to CPU `N` and spins until killed.

@@ -17,7 +17,8 @@
 //! `--pin-cpu 0` runs the whole bench on one core (one rayon thread; the background worker
 //! at nice +19 on the same core), and `--hog-cpu 1` keeps another core busy with a spinning
 //! process for the whole measurement: a board whose other cores belong to the apps
-//! (`cores`).
+//! (`cores`). `--pin-threads` pins each frame-path thread to a CPU of its own, as deard's
+//! `[runtime] pin_threads` (`dear_pipeline::threads` says when that pays).
 //!
 //! ```sh
 //! cargo build --release -p dear-synth -p dear-tools --bin dear-synth --bin deard-bench
@@ -92,6 +93,10 @@ struct Cli {
     /// thread): the one-core figures. As `taskset -c CPU` with `RAYON_NUM_THREADS=1`.
     #[arg(long)]
     pin_cpu: Option<usize>,
+    /// Pin each frame-path thread to a CPU of its own, one per CPU (or RAYON_NUM_THREADS), as
+    /// deard's `[runtime] pin_threads` does.
+    #[arg(long, conflicts_with = "pin_cpu")]
+    pin_threads: bool,
     /// Keep this CPU busy with a spinning process while measuring (repeatable): the figures of
     /// a board whose other cores run the apps.
     #[arg(long = "hog-cpu")]
@@ -163,6 +168,8 @@ struct Report {
     machine: Option<machine::MachineLimits>,
     /// `--pin-cpu`: the one CPU every thread ran on.
     pinned_cpu: Option<usize>,
+    /// `--pin-threads`: the CPUs the frame path's threads were pinned to, one each.
+    pinned_threads: Option<Vec<usize>>,
     /// `--hog-cpu`: the CPUs kept busy by a spinning process.
     hog_cpus: Vec<usize>,
     modes: Vec<ModeReport>,
@@ -193,7 +200,18 @@ fn main() -> ExitCode {
             return ExitCode::FAILURE;
         }
     }
-    match run(&cli) {
+    let pinned_threads = if cli.pin_threads {
+        match dear_pipeline::threads::pin_global_pool() {
+            Ok(cpus) => Some(cpus),
+            Err(e) => {
+                eprintln!("deard-bench: --pin-threads: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    } else {
+        None
+    };
+    match run(&cli, pinned_threads) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("deard-bench: {e}");
@@ -202,7 +220,7 @@ fn main() -> ExitCode {
     }
 }
 
-fn run(cli: &Cli) -> Result<(), String> {
+fn run(cli: &Cli, pinned_threads: Option<Vec<usize>>) -> Result<(), String> {
     if cli.frames == 0 {
         return Err("--frames must be at least 1".into());
     }
@@ -256,6 +274,9 @@ fn run(cli: &Cli) -> Result<(), String> {
             rayon::current_num_threads()
         );
     }
+    if let Some(cpus) = &pinned_threads {
+        println!("frame-path threads pinned, one per CPU: {cpus:?}");
+    }
     let hogs = cores::Hogs::start(&cli.hog_cpus)?;
     if !cli.hog_cpus.is_empty() {
         println!("busy board: a spinning process on {}", hogs.describe());
@@ -299,6 +320,7 @@ fn run(cli: &Cli) -> Result<(), String> {
             fps: cli.fps,
             machine: limits,
             pinned_cpu: cli.pin_cpu,
+            pinned_threads,
             hog_cpus: cli.hog_cpus.clone(),
             modes: reports,
         };
