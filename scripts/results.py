@@ -494,20 +494,33 @@ def table_latency(criterion: Path, onnxruntime: Path, interval: int) -> list[str
     return lines
 
 
+def bench_threads(bench: dict) -> str:
+    """Where a `deard-bench --json` run's threads ran: placed by the scheduler, pinned one per
+    CPU (`--pin-threads`), or all on one CPU (`--pin-cpu`)."""
+    if bench.get("pinned_cpu") is not None:
+        return f"all on CPU {bench['pinned_cpu']}"
+    pinned = bench.get("pinned_threads")
+    if pinned:
+        return "pinned, one per CPU " + ", ".join(str(cpu) for cpu in pinned)
+    return f"{bench['threads_available']} CPUs, placed by the scheduler"
+
+
 def table_daemon(benches: list[Path]) -> list[str]:
     """Rows of `deard-bench --json` files: time per frame and latency of the daemon's processing."""
     lines = [
         (
-            "| Frame size | Calibration | frames with the flow network | frames overlapped | "
-            "median (ms) | p95 (ms) | mean (ms) | latency median (ms) | stage medians (ms) |"
+            "| Frame size | Threads | Calibration | frames with the flow network | "
+            "frames overlapped | median (ms) | p95 (ms) | mean (ms) | latency median (ms) | "
+            "stage medians (ms) |"
         ),
-        "|---|---|---:|---:|---:|---:|---:|---:|---|",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---|",
     ]
     for path in benches:
         if not path.is_file():
             continue
         bench = json.loads(path.read_text())
         size = f"{bench['width']}×{bench['height']}"
+        threads = bench_threads(bench)
         for m in bench["modes"]:
             runs = m["with_network"]["count"] if m["with_network"] else 0
             stages = ", ".join(f"{k} {v:.1f}" for k, v in m["stage_median_ms"] if v > 0)
@@ -519,7 +532,7 @@ def table_daemon(benches: list[Path]) -> list[str]:
             latency = m.get("latency", m["all"])["median_ms"]
             for what, t in rows:
                 lines.append(
-                    f"| {size} | {m['mode']}, {what} | {runs} / {m['all']['count']} | "
+                    f"| {size} | {threads} | {m['mode']}, {what} | {runs} / {m['all']['count']} | "
                     f"{overlapped} | {t['median_ms']:.1f} | {t['p95_ms']:.1f} | "
                     f"{t['mean_ms']:.1f} | {latency:.1f} | {stages} |"
                 )
@@ -718,14 +731,16 @@ def headline_table(eval_dir: Path) -> list[str]:
             f"{ms(sequence, b)} ms)"
         )
     vga = daemon_online(eval_dir / "deard-bench-vga.json")
+    vga_pinned = daemon_online(eval_dir / "deard-bench-vga-pinned.json")
     qvga = daemon_online(eval_dir / "deard-bench-qvga.json")
 
     def bench(timing: dict | None, key: str) -> str:
         return fmt(None if timing is None else timing[key], 1)
 
     daemon = (
-        f"640×480: median {bench(vga, 'median_ms')} ms, p95 {bench(vga, 'p95_ms')}; "
-        f"320×240: {bench(qvga, 'median_ms')} ms"
+        f"640×480: median {bench(vga, 'median_ms')} ms, p95 {bench(vga, 'p95_ms')} "
+        f"(threads pinned: {bench(vga_pinned, 'median_ms')}, p95 "
+        f"{bench(vga_pinned, 'p95_ms')}); 320×240: {bench(qvga, 'median_ms')} ms"
     )
     families = ", ".join(
         f"`{name}` {fmt(field(load_optional(eval_dir, name), b, 'aepe_px'))}"
@@ -1028,7 +1043,13 @@ def main() -> None:
             '"refine" the confidence map and the edge check.'
         ),
         "",
-        *table_daemon([args.eval / "deard-bench-vga.json", args.eval / "deard-bench-qvga.json"]),
+        *table_daemon(
+            [
+                args.eval / "deard-bench-vga.json",
+                args.eval / "deard-bench-vga-pinned.json",
+                args.eval / "deard-bench-qvga.json",
+            ]
+        ),
         "",
         "## Physical limits",
         "",

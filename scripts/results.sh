@@ -183,6 +183,10 @@ cargo bench --quiet -p dear-pipeline --bench dear_chain -- --warm-up-time 2 \
 echo "== the daemon's processing per frame (deard-bench)"
 target/release/deard-bench --capture "$data/vga_sequence" --frames 120 --machine \
     --json "$out/deard-bench-vga.json" > /dev/null
+# The same with each frame-path thread pinned to a CPU of its own (deard's [runtime]
+# pin_threads; docs/daemon.md, "CPUs").
+target/release/deard-bench --capture "$data/vga_sequence" --frames 120 --mode online \
+    --pin-threads --json "$out/deard-bench-vga-pinned.json" > /dev/null
 target/release/deard-bench --capture "$data/sequence" --frames 200 \
     --json "$out/deard-bench-qvga.json" > /dev/null
 .venv/bin/python scripts/results.py --eval "$out" --out RESULTS.md --figures results/figures
