@@ -497,17 +497,17 @@ fn the_background_worker_runs_at_the_lowest_priority() {
     let own = nice_in(&std::fs::read_to_string("/proc/thread-self/stat").unwrap())
         .expect("the test thread's own nice value");
     let expected = (own + 19).min(19);
-    // The worker lowers its priority as it starts: wait for it to show.
+    // Each thread lowers its priority as it starts: wait for it to show.
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
-    let worker_nice = loop {
-        let nice = nice_of(name);
+    let settled_nice_of = |comm: &str| loop {
+        let nice = nice_of(comm);
         if nice == Some(expected) || std::time::Instant::now() > deadline {
             break nice;
         }
         std::thread::sleep(std::time::Duration::from_millis(10));
     };
     assert_eq!(
-        worker_nice,
+        settled_nice_of(name),
         Some(expected),
         "the worker's nice value (caller at {own})"
     );
@@ -516,15 +516,8 @@ fn the_background_worker_runs_at_the_lowest_priority() {
     let pool_threads = rayon::current_num_threads();
     for index in 0..pool_threads {
         let comm = format!("{name}-{index}");
-        let nice = loop {
-            let nice = nice_of(&comm);
-            if nice == Some(expected) || std::time::Instant::now() > deadline {
-                break nice;
-            }
-            std::thread::sleep(std::time::Duration::from_millis(10));
-        };
         assert_eq!(
-            nice,
+            settled_nice_of(&comm),
             Some(expected),
             "{comm}'s nice value (caller at {own})"
         );
