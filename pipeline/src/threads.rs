@@ -2,14 +2,16 @@
 //! of its own.
 //!
 //! Why pinning is offered: on the 2-core development machine, `deard-bench` at 640×480 with
-//! frames back to back ran a median of 15.6 ms with a p95 of 31.2 when the scheduler placed the
-//! pool's two threads, and 16.2 / 19.8 ms with each pinned to one CPU. The slow frames came in
-//! runs of 3–6 in which every stage took twice its time: the scheduler had put both threads on
-//! one CPU for a while (a CPU hog or a memory-bandwidth hog on the other core did not do that to
-//! one pinned thread; the measurement off the frame path was not the cause either: it came with
-//! that measurement off). Why it is not the default: a pinned thread cannot move away from a
-//! CPU that another process keeps busy, and the frame waits for it (the same bench with a
-//! spinning process on CPU 1: median 80 ms pinned, 34 ms not). Pin only on CPUs the daemon has
+//! frames back to back ran a median of 16.1–16.6 ms with a p95 of 31–32 when the scheduler
+//! placed the pool's two threads, and 16.1–17.5 / 20.0–20.8 ms with each pinned to one CPU
+//! (three alternating pairs). The slow frames came in runs of 3–6 in which every stage took
+//! twice its time: the scheduler had put both threads on one CPU for a while (a CPU hog or a
+//! memory-bandwidth hog on the other core did not do that to one pinned thread, and the
+//! measurement off the frame path was not the cause: the runs came with it off). Why it is not
+//! the default: a pinned thread cannot move away from a CPU that another process keeps busy,
+//! and the frame waits for it (the same bench with a spinning process on CPU 1: median 72 ms
+//! pinned, 34 ms not); at 30 fps offered, when the frame path waits for each frame, it changed
+//! nothing measurable. Pin only on CPUs the daemon has
 //! to itself (systemd's `CPUAffinity=`, `taskset`, `isolcpus`); on a board whose apps share
 //! every core, run it on one (docs/performance.md).
 
