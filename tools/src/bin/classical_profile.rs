@@ -16,6 +16,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use anyhow::{ensure, Context};
+use clap::Parser;
 use dear_capture::CaptureDir;
 use dear_pipeline::filter::domain_transform::{domain_transform_masked, DomainTransformScratch};
 use dear_pipeline::filter::fill::fill_holes;
@@ -38,6 +40,26 @@ const NAMES: [&str; 7] = [
     "refine_into (all)",
 ];
 
+/// Time per stage of the classical refiner on the first frames of a capture.
+#[derive(Debug, Parser)]
+#[command(version)]
+struct Cli {
+    /// Capture directory (its first --frames frames are profiled).
+    capture: PathBuf,
+    /// Frames profiled, from the capture's first.
+    #[arg(long, default_value_t = 4)]
+    frames: usize,
+    /// Timed repetitions per frame (after one untimed warm-up; at least one is run).
+    #[arg(long, default_value_t = 10)]
+    iters: usize,
+    /// Write the refiner's output for each frame to this directory (depth_NNN.f32, conf_NNN.u8).
+    #[arg(long)]
+    dump: Option<PathBuf>,
+    /// Compare the refiner's output with a --dump written earlier to this directory.
+    #[arg(long)]
+    check: Option<PathBuf>,
+}
+
 fn median_min(v: &mut [f64]) -> (f64, f64) {
     v.sort_by(f64::total_cmp);
     (v[v.len() / 2], v[0])
@@ -56,29 +78,40 @@ fn dump_paths(dir: &Path, i: usize) -> (PathBuf, PathBuf) {
     )
 }
 
-fn main() {
-    let mut args = std::env::args().skip(1);
-    let (mut positional, mut frames, mut iters) = (Vec::new(), 4usize, 10usize);
-    let (mut dump, mut check) = (None, None);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--frames" => frames = args.next().unwrap().parse().unwrap(),
-            "--iters" => iters = args.next().unwrap().parse().unwrap(),
-            "--dump" => dump = Some(PathBuf::from(args.next().unwrap())),
-            "--check" => check = Some(PathBuf::from(args.next().unwrap())),
-            _ => positional.push(a),
-        }
-    }
-    let cap = CaptureDir::open(&positional[0]).unwrap();
+/// Reads one file of a `--check` dump.
+fn read_dump(path: &Path) -> anyhow::Result<Vec<u8>> {
+    std::fs::read(path).with_context(|| format!("cannot read the dump file {}", path.display()))
+}
+
+fn main() -> anyhow::Result<()> {
+    let Cli {
+        capture,
+        frames,
+        iters,
+        dump,
+        check,
+    } = Cli::parse();
+    let cap = CaptureDir::open(&capture)
+        .with_context(|| format!("cannot open the capture {}", capture.display()))?;
+    ensure!(frames >= 1, "--frames must be at least 1");
+    ensure!(
+        frames <= cap.len(),
+        "--frames {frames}: the capture {} has only {} frames",
+        capture.display(),
+        cap.len()
+    );
     let p = ClassicalParams::default();
     let mut refiner = ClassicalRefiner::new(p);
     let mut times: Vec<Vec<f64>> = vec![Vec::new(); NAMES.len()];
     let (mut differing, mut max_diff) = (0usize, 0.0f32);
     if let Some(dir) = &dump {
-        std::fs::create_dir_all(dir).unwrap();
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the dump directory {}", dir.display()))?;
     }
     for i in 0..frames {
-        let f = cap.read_frame(i).unwrap();
+        let f = cap.read_frame(i).with_context(|| {
+            format!("cannot read frame {i} of the capture {}", capture.display())
+        })?;
         let (depth, rgb) = (f.depth.view(), f.rgb.view());
         let (h, w) = depth.dim();
         let z = || Array2::<f32>::zeros((h, w));
@@ -150,18 +183,25 @@ fn main() {
         let conf_bytes: Vec<u8> = conf.iter().copied().collect();
         if let Some(dir) = &dump {
             let (dp, cp) = dump_paths(dir, i);
-            std::fs::write(dp, &depth_bytes).unwrap();
-            std::fs::write(cp, &conf_bytes).unwrap();
+            std::fs::write(&dp, &depth_bytes)
+                .with_context(|| format!("cannot write {}", dp.display()))?;
+            std::fs::write(&cp, &conf_bytes)
+                .with_context(|| format!("cannot write {}", cp.display()))?;
         }
         if let Some(dir) = &check {
             let (dp, cp) = dump_paths(dir, i);
-            let ref_depth = std::fs::read(dp).unwrap();
-            let ref_conf = std::fs::read(cp).unwrap();
-            assert_eq!(
-                ref_depth.len(),
-                depth_bytes.len(),
-                "frame {i}: size differs"
-            );
+            let ref_depth = read_dump(&dp)?;
+            let ref_conf = read_dump(&cp)?;
+            for (path, found, expected) in [
+                (&dp, ref_depth.len(), depth_bytes.len()),
+                (&cp, ref_conf.len(), conf_bytes.len()),
+            ] {
+                ensure!(
+                    found == expected,
+                    "frame {i}: size differs: {} has {found} bytes, the output {expected}",
+                    path.display()
+                );
+            }
             for (k, (a, b)) in ref_depth
                 .chunks_exact(4)
                 .zip(depth_bytes.chunks_exact(4))
@@ -193,4 +233,5 @@ fn main() {
              largest depth difference {max_diff:e} m"
         );
     }
+    Ok(())
 }

@@ -6,22 +6,72 @@
 //! cargo run --release -p dear-tools --bin graph_profile -- models/edge/refine.onnx 480 640 1,1,3,1
 //! ```
 //! Arguments: the ONNX file, height, width, and the channel count of each graph input in the
-//! graph's order (the refine graph: amplitude, depth, rgb, classical).
+//! graph's order, comma-separated, one per input (the refine graph: amplitude, depth, rgb,
+//! classical).
 use std::collections::HashMap;
+use std::path::PathBuf;
+use std::str::FromStr;
 use std::time::Instant;
 
+use anyhow::{ensure, Context};
+use clap::Parser;
 use tract_onnx::prelude::*;
 
-fn main() -> TractResult<()> {
-    let args: Vec<String> = std::env::args().collect();
-    let path = &args[1];
-    let h: usize = args[2].parse()?;
-    let w: usize = args[3].parse()?;
-    let mut model = tract_onnx::onnx().model_for_path(path)?;
+/// Per-node times of an ONNX graph in tract (one thread), at a given input size.
+#[derive(Debug, Parser)]
+#[command(version)]
+struct Cli {
+    /// The ONNX graph to profile (e.g. models/edge/refine.onnx).
+    onnx: PathBuf,
+    /// Input height, pixels.
+    height: usize,
+    /// Input width, pixels.
+    width: usize,
+    /// Channel count of each graph input, comma-separated, in the graph's order (refine: 1,1,3,1).
+    channels: Channels,
+}
+
+/// The `CHANNELS` argument: one channel count per graph input.
+#[derive(Debug, Clone)]
+struct Channels(Vec<usize>);
+
+impl FromStr for Channels {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        s.split(',')
+            .map(|c| {
+                c.parse()
+                    .map_err(|e| format!("`{c}` is not a channel count: {e}"))
+            })
+            .collect::<Result<_, _>>()
+            .map(Channels)
+    }
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    let (path, h, w) = (&cli.onnx, cli.height, cli.width);
+    let mut model = tract_onnx::onnx()
+        .model_for_path(path)
+        .with_context(|| format!("cannot load the ONNX graph {}", path.display()))?;
     let n_inputs = model.inputs.len();
+    let channels = &cli.channels.0;
+    ensure!(
+        channels.len() == n_inputs,
+        "CHANNELS has {} entries but {} has {n_inputs} inputs ({}): give one channel count per \
+         graph input, in that order",
+        channels.len(),
+        path.display(),
+        model
+            .inputs
+            .iter()
+            .map(|o| model.node(o.node).name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
     let mut tensors = tvec![];
-    for i in 0..n_inputs {
-        let c: usize = args[4].split(',').nth(i).unwrap().parse()?;
+    for (i, &c) in channels.iter().enumerate() {
         model.set_input_fact(
             i,
             InferenceFact::dt_shape(f32::datum_type(), tvec![1, c, h, w]),
@@ -31,11 +81,23 @@ fn main() -> TractResult<()> {
         });
         tensors.push(Tensor::from(t).into_tvalue());
     }
-    let typed = model.into_optimized()?;
+    let typed = model.into_optimized().with_context(|| {
+        format!(
+            "cannot optimise {} for inputs of {} channels at {h}x{w}",
+            path.display(),
+            channels
+                .iter()
+                .map(usize::to_string)
+                .collect::<Vec<_>>()
+                .join(",")
+        )
+    })?;
     let plan = typed.into_runnable()?;
     let mut state = TypedSimpleState::new(&plan)?;
     for _ in 0..3 {
-        state.run(tensors.clone())?;
+        state
+            .run(tensors.clone())
+            .with_context(|| format!("cannot run {}", path.display()))?;
     }
     let n = 10;
     let mut times: HashMap<usize, (String, String, f64)> = HashMap::new();

@@ -4,25 +4,29 @@
 //!
 //! ```text
 //! cargo build --release -p dear-tools --bin stage_profile
-//! target/release/stage_profile CAPTURE BUNDLE [--full] [--iters N] [--dump DIR]
+//! target/release/stage_profile CAPTURE [BUNDLE] [--full] [--iters N] [--dump DIR]
 //!     [--worker N] [--tract-threads N]
 //! ```
 //!
-//! Prints the median (and minimum) milliseconds per stage. `--worker N` also times, N times,
-//! the parts of the background worker's measurement (`DearChain::measure`) on the same frame:
-//! the rough-flow network, the robust least squares of its flow and the direct fit to the
-//! edges, and prints the fitted calibrations' bit patterns (to check an optimisation leaves
-//! them unchanged). `--tract-threads N` runs the refine graph on a pool of N threads (build with
-//! `--features multithread`; without it the option has no effect). `--dump DIR` writes every geometry
-//! stage's output for the frame as raw little-endian bytes (and the edge check's numbers as
-//! bit patterns), so an optimisation can be checked to leave them bit-identical with `cmp`;
-//! with `--full` also the classical filter's output and the refined depth.
+//! Prints the median (and minimum) milliseconds per stage. The bundle is needed (and loaded)
+//! only with `--full` or `--worker`. `--worker N` also times, N times, the parts of the
+//! background worker's measurement (`DearChain::measure`) on the same frame: the rough-flow
+//! network, the robust least squares of its flow and the direct fit to the edges, and prints
+//! the fitted calibrations' bit patterns (to check an optimisation leaves them unchanged).
+//! `--tract-threads N` runs the refine graph on a pool of N threads (build with
+//! `--features dear-pipeline/multithread`; without it the option has no effect). `--dump DIR`
+//! writes every geometry stage's output for the frame as raw little-endian bytes (and the edge
+//! check's numbers as bit patterns), so an optimisation can be checked to leave them
+//! bit-identical with `cmp`; with `--full` also the classical filter's output and the refined
+//! depth.
 //! The dumped confidence is computed against the aligned (splatted) depth rather than the
 //! refine graph's output, so the dump depends only on the geometry code.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use anyhow::{bail, ensure, Context};
+use clap::Parser;
 use dear_capture::frame::Flow;
 use dear_capture::Calibration;
 use dear_capture::CaptureDir;
@@ -51,35 +55,96 @@ const NAMES: [&str; 7] = [
     "edge check",
 ];
 
-fn write_f32(dir: &Path, name: &str, a: &Array2<f32>) {
-    let bytes: Vec<u8> = a.iter().flat_map(|v| v.to_le_bytes()).collect();
-    std::fs::write(dir.join(name), bytes).unwrap();
+/// Time per stage of the daemon's steady-state frame path on frame 0 of a capture.
+#[derive(Debug, Parser)]
+#[command(version)]
+struct Cli {
+    /// Capture directory (its frame 0 is profiled).
+    capture: PathBuf,
+    /// Model bundle directory (e.g. models/edge); needed by --full and --worker.
+    bundle: Option<PathBuf>,
+    /// Also time the classical filter and the refine graph (needs BUNDLE).
+    #[arg(long)]
+    full: bool,
+    /// Timed repetitions of the frame (after three untimed ones).
+    #[arg(long, default_value_t = 20)]
+    iters: usize,
+    /// Write every stage's output for the frame to this directory, as raw little-endian bytes.
+    #[arg(long)]
+    dump: Option<PathBuf>,
+    /// Also time the background worker's measurement this many times (needs BUNDLE).
+    #[arg(long, default_value_t = 0)]
+    worker: usize,
+    /// Threads of the refine graph's pool (only with --features dear-pipeline/multithread).
+    #[arg(long, default_value_t = 1)]
+    tract_threads: usize,
 }
 
-fn main() {
-    let mut args = std::env::args().skip(1);
-    let (mut positional, mut full, mut iters, mut dump) = (Vec::new(), false, 20usize, None);
-    let (mut worker, mut tract_threads) = (0usize, 1usize);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--full" => full = true,
-            "--iters" => iters = args.next().unwrap().parse().unwrap(),
-            "--dump" => dump = Some(PathBuf::from(args.next().unwrap())),
-            "--worker" => worker = args.next().unwrap().parse().unwrap(),
-            "--tract-threads" => tract_threads = args.next().unwrap().parse().unwrap(),
-            _ => positional.push(a),
-        }
-    }
-    let cap = CaptureDir::open(&positional[0]).unwrap();
-    let f = cap.read_frame(0).unwrap();
+/// Writes `bytes` to `dir/name`.
+fn write_bytes(dir: &Path, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).with_context(|| format!("cannot write {}", path.display()))
+}
+
+fn write_f32(dir: &Path, name: &str, a: &Array2<f32>) -> anyhow::Result<()> {
+    let bytes: Vec<u8> = a.iter().flat_map(|v| v.to_le_bytes()).collect();
+    write_bytes(dir, name, &bytes)
+}
+
+fn main() -> anyhow::Result<()> {
+    let Cli {
+        capture,
+        bundle: bundle_path,
+        full,
+        iters,
+        dump,
+        worker,
+        tract_threads,
+    } = Cli::parse();
+    let cap = CaptureDir::open(&capture)
+        .with_context(|| format!("cannot open the capture {}", capture.display()))?;
+    ensure!(
+        !cap.is_empty(),
+        "the capture {} has no frames",
+        capture.display()
+    );
+    let f = cap
+        .read_frame(0)
+        .with_context(|| format!("cannot read frame 0 of the capture {}", capture.display()))?;
     let (h, w) = f.dim();
-    let bundle = (full || worker > 0).then(|| ModelBundle::load(&positional[1]).unwrap());
-    let mut runner = bundle.as_ref().filter(|_| full).map(|b| {
-        let options = RunnerOptions {
-            threads: tract_threads,
-        };
-        BundleRunner::with_options(b, w, h, options).unwrap()
-    });
+    // Before the measurement, so that a bad --dump fails at once.
+    if let Some(dir) = &dump {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the dump directory {}", dir.display()))?;
+    }
+    let bundle = match (&bundle_path, full || worker > 0) {
+        (Some(path), true) => Some(
+            ModelBundle::load(path)
+                .with_context(|| format!("cannot load the model bundle {}", path.display()))?,
+        ),
+        (None, true) => {
+            bail!("--full and --worker need the model bundle: give BUNDLE after CAPTURE")
+        }
+        (_, false) => None,
+    };
+    // For the errors.
+    let bundle_name = bundle_path
+        .as_deref()
+        .map(|p| p.display().to_string())
+        .unwrap_or_default();
+    let mut runner = match bundle.as_ref().filter(|_| full) {
+        Some(b) => {
+            let options = RunnerOptions {
+                threads: tract_threads,
+            };
+            Some(
+                BundleRunner::with_options(b, w, h, options).with_context(|| {
+                    format!("cannot prepare the bundle {bundle_name}'s graphs for {w}x{h} frames")
+                })?,
+            )
+        }
+        None => None,
+    };
     let calib = Calibration {
         tx: 6.0,
         ty: -2.0,
@@ -143,7 +208,7 @@ fn main() {
                     .then(|| [r.view(), g.view(), b.view()]);
                 runner
                     .refine(aw.view(), dw.view(), rgb, Some(cd.view()), out.view_mut())
-                    .unwrap();
+                    .with_context(|| format!("the refine graph of {bundle_name} failed"))?;
                 lap(4, &mut t);
                 out.view()
             }
@@ -171,28 +236,27 @@ fn main() {
     println!("{:20} {total:8.2}", "geometry total");
 
     if let Some(bundle) = bundle.as_ref().filter(|_| worker > 0) {
-        profile_worker(bundle, &f, worker);
+        profile_worker(bundle, &bundle_name, &f, worker)?;
     }
 
     if let Some(dir) = dump {
-        std::fs::create_dir_all(&dir).unwrap();
         for (k, p) in rgbp.iter().enumerate() {
-            write_f32(&dir, &format!("pre_rgb{k}.f32"), p);
+            write_f32(&dir, &format!("pre_rgb{k}.f32"), p)?;
         }
-        write_f32(&dir, "pre_amp.f32", &amp);
-        write_f32(&dir, "align_depth.f32", &drgb);
-        write_f32(&dir, "align_flow_u.f32", &aligner.flow().u);
-        write_f32(&dir, "align_flow_v.f32", &aligner.flow().v);
-        write_f32(&dir, "warp_depth.f32", &dw);
-        write_f32(&dir, "warp_amp.f32", &aw);
+        write_f32(&dir, "pre_amp.f32", &amp)?;
+        write_f32(&dir, "align_depth.f32", &drgb)?;
+        write_f32(&dir, "align_flow_u.f32", &aligner.flow().u)?;
+        write_f32(&dir, "align_flow_v.f32", &aligner.flow().v)?;
+        write_f32(&dir, "warp_depth.f32", &dw)?;
+        write_f32(&dir, "warp_amp.f32", &aw)?;
         if runner.is_some() {
             // With --full: the classical filter's output and the refiner's (graph and tail).
-            write_f32(&dir, "classical_depth.f32", &cd);
-            std::fs::write(dir.join("classical_conf.u8"), cc.as_slice().unwrap()).unwrap();
-            write_f32(&dir, "refined_depth.f32", &out);
+            write_f32(&dir, "classical_depth.f32", &cd)?;
+            write_bytes(&dir, "classical_conf.u8", cc.as_slice().unwrap())?;
+            write_f32(&dir, "refined_depth.f32", &out)?;
         }
         confidence_into(dw.view(), drgb.view(), conf.view_mut());
-        std::fs::write(dir.join("confidence.u8"), conf.as_slice().unwrap()).unwrap();
+        write_bytes(&dir, "confidence.u8", conf.as_slice().unwrap())?;
         let edge = edge.map(|e| {
             let s = e.shift.map(|s| {
                 (
@@ -205,15 +269,23 @@ fn main() {
             });
             (e.disagreement.to_bits(), s, format!("{e:?}"))
         });
-        std::fs::write(dir.join("edge.txt"), format!("{edge:?}\n")).unwrap();
+        write_bytes(&dir, "edge.txt", format!("{edge:?}\n").as_bytes())?;
         println!("dumped to {}", dir.display());
     }
+    Ok(())
 }
 
 /// Times the parts of the worker's measurement on `f`, `n` times, and prints the fits' bits.
-fn profile_worker(bundle: &ModelBundle, f: &dear_capture::RgbdFrame, n: usize) {
+/// `name` is the bundle's path, for the errors.
+fn profile_worker(
+    bundle: &ModelBundle,
+    name: &str,
+    f: &dear_capture::RgbdFrame,
+    n: usize,
+) -> anyhow::Result<()> {
     let (h, w) = f.dim();
-    let mut runner = BundleRunner::new(bundle, w, h).unwrap();
+    let mut runner = BundleRunner::new(bundle, w, h)
+        .with_context(|| format!("cannot prepare the bundle {name}'s graphs for {w}x{h} frames"))?;
     let norm = bundle.normalisation();
     let mut rgbp = [
         Array2::<f32>::zeros((h, w)),
@@ -239,12 +311,12 @@ fn profile_worker(bundle: &ModelBundle, f: &dear_capture::RgbdFrame, n: usize) {
         let [r, g, b] = &rgbp;
         runner
             .flow([r.view(), g.view(), b.view()], amp.view(), &mut flow)
-            .unwrap();
+            .with_context(|| format!("the rough-flow graph of {name} failed"))?;
         let c0 = Instant::now();
         warp_depth(f.depth.view(), &flow, drgb.view_mut());
         let c1 = Instant::now();
-        let fit =
-            Measurement::from_flow(&flow, drgb.view(), RobustOptions::default(), 3.0).unwrap();
+        let fit = Measurement::from_flow(&flow, drgb.view(), RobustOptions::default(), 3.0)
+            .with_context(|| format!("no calibration fits the rough flow of {name}"))?;
         let c2 = Instant::now();
         let direct = estimate_calibration_direct(
             f.rgb.view(),
@@ -286,4 +358,5 @@ fn profile_worker(bundle: &ModelBundle, f: &dear_capture::RgbdFrame, n: usize) {
             bits(direct.calibration)
         );
     }
+    Ok(())
 }
