@@ -1372,6 +1372,15 @@ mod tests {
     use super::*;
     use crate::recalibration::edges::test_scene::{fit_textured_scene, textured_scene};
 
+    /// The calibration the tests' scenes are seen through: a baseline and a principal-point
+    /// offset, both a few pixels at the scenes' depths.
+    const TRUTH: Calibration = Calibration {
+        tx: 6.0,
+        ty: -2.0,
+        cx: 3.0,
+        cy: 1.5,
+    };
+
     fn max_flow_error(c: Calibration, truth: Calibration, depths: &[f32]) -> f32 {
         depths
             .iter()
@@ -1386,12 +1395,7 @@ mod tests {
     /// `q − W(z)` in the view `synthesize_view` makes.
     #[test]
     fn direct_landing_matches_the_splatting_convention() {
-        let truth = Calibration {
-            tx: 6.0,
-            ty: -2.0,
-            cx: 3.0,
-            cy: 1.5,
-        };
+        let truth = TRUTH;
         let (h, w) = (40, 60);
         // One bright ToF pixel at (20, 30), depth 1.5 m, on a 3 m wall.
         let depth =
@@ -1440,12 +1444,7 @@ mod tests {
     /// behind has only RGB stripes).
     #[test]
     fn direct_recovers_a_known_calibration_on_a_textured_scene() {
-        let truth = Calibration {
-            tx: 6.0,
-            ty: -2.0,
-            cx: 3.0,
-            cy: 1.5,
-        };
+        let truth = TRUTH;
         let fit = fit_textured_scene(&truth);
         assert!(!fit.fell_back, "{fit:?}");
         assert!(fit.baseline_fitted, "{fit:?}");
@@ -1506,12 +1505,7 @@ mod tests {
     /// frame's calibration; searching around the start alone cannot, and keeps the drifted one.
     #[test]
     fn a_start_beyond_the_search_is_rescued_by_searching_from_the_reference() {
-        let truth = Calibration {
-            tx: 6.0,
-            ty: -2.0,
-            cx: 3.0,
-            cy: 1.5,
-        };
+        let truth = TRUTH;
         let (rgb, amplitude, depth) = textured_scene(&truth);
         let reference = Calibration {
             cx: truth.cx - 4.0,
@@ -1633,12 +1627,7 @@ mod tests {
     /// [`DirectFitParams::max_mean_flow_change_px`] is refused; within it, taken.
     #[test]
     fn a_fit_beyond_the_flow_change_limit_is_refused() {
-        let truth = Calibration {
-            tx: 6.0,
-            ty: -2.0,
-            cx: 3.0,
-            cy: 1.5,
-        };
+        let truth = TRUTH;
         let (rgb, amplitude, depth) = textured_scene(&truth);
         let fit = |max_mean_flow_change_px: f32| {
             let params = DirectFitParams {
