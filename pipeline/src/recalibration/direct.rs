@@ -301,14 +301,13 @@ pub fn estimate_calibration_direct_against(
     let fit_t = rel_inv_depth_spread(fine) >= params.min_rel_inv_depth_spread as f64;
 
     // Exhaustive search of c at the coarsest level, t held, around the start and (see
-    // `search_from_reference`) around the reference, whose fits are ranked by their
-    // correlation less `reference_handicap`. Each fit: (θ, correlation, handicap).
+    // `search_from_reference`) around the reference, whose fits carry `reference_handicap`.
     let top = &pyramid[coarsest];
     let mut starts = vec![(initial_theta, 0.0)];
     if params.search_from_reference && reference_theta.p != initial_theta.p {
         starts.push((reference_theta, params.reference_handicap as f64));
     }
-    let mut refined: Vec<(Theta, f64, f64)> = starts
+    let mut refined: Vec<Candidate> = starts
         .iter()
         .flat_map(|&(start, handicap)| {
             search_offsets(top, &start, params)
@@ -316,29 +315,39 @@ pub fn estimate_calibration_direct_against(
                 .map(move |c| (c, handicap))
         })
         .map(|(c, handicap)| {
-            let (theta, corr) = gauss_newton(top, c, fit_t, params.iterations, params.robust_k);
-            (theta, corr, handicap)
+            let (theta, correlation) =
+                gauss_newton(top, c, fit_t, params.iterations, params.robust_k);
+            Candidate {
+                theta,
+                correlation,
+                handicap,
+            }
         })
-        .filter(|(_, corr, _)| corr.is_finite())
+        .filter(|c| c.correlation.is_finite())
         .collect();
-    refined.sort_by(|a, b| (b.1 - b.2).total_cmp(&(a.1 - a.2)));
+    refined.sort_by(|a, b| b.score().total_cmp(&a.score()));
     let carried = distinct_fits(
         top,
         refined,
         params.carried_fits.max(1),
         params.carry_margin,
     );
-    let mut best: Option<(Theta, f64, f64)> = None;
-    for (mut theta, mut corr, handicap) in carried {
+    let mut best: Option<Candidate> = None;
+    for mut fit in carried {
         for level in pyramid[finest..coarsest].iter().rev() {
-            (theta, corr) = gauss_newton(level, theta, fit_t, params.iterations, params.robust_k);
+            (fit.theta, fit.correlation) =
+                gauss_newton(level, fit.theta, fit_t, params.iterations, params.robust_k);
         }
-        if best.is_none_or(|(_, b, h)| corr - handicap > b - h) {
-            best = Some((theta, corr, handicap));
+        if best.is_none_or(|b| fit.score() > b.score()) {
+            best = Some(fit);
         }
     }
-    let best = best.map(|(theta, corr, _)| (theta, corr));
-    let Some((theta, corr)) = best else {
+    let Some(Candidate {
+        theta,
+        correlation: corr,
+        ..
+    }) = best
+    else {
         return fallback(initial_correlation as f32);
     };
     let corr = corr as f32;
@@ -826,26 +835,35 @@ fn mean_flow_change(level: &Level, a: &Theta, b: &Theta) -> f64 {
     }
 }
 
-/// The best `keep` of `fits`, each `(θ, correlation, handicap)` and sorted best first by
-/// correlation less handicap, within `margin` of the best such score whose flows differ on
-/// average by more than 1 px (full resolution) from every better one kept: fits that
-/// converged to one basin are refined once.
-fn distinct_fits(
-    level: &Level,
-    fits: Vec<(Theta, f64, f64)>,
-    keep: usize,
-    margin: f32,
-) -> Vec<(Theta, f64, f64)> {
-    let score = |fit: &(Theta, f64, f64)| fit.1 - fit.2;
-    let mut kept: Vec<(Theta, f64, f64)> = Vec::with_capacity(keep);
-    let best = fits.first().map_or(f64::NEG_INFINITY, score);
+/// A fit on its way down the pyramid, with the handicap of the search that found it
+/// ([`DirectFitParams::reference_handicap`] for the reference's search, else 0).
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    theta: Theta,
+    correlation: f64,
+    handicap: f64,
+}
+
+impl Candidate {
+    /// What fits are ranked and chosen by: the correlation less the handicap.
+    fn score(&self) -> f64 {
+        self.correlation - self.handicap
+    }
+}
+
+/// The best `keep` of `fits` (sorted best first by [`Candidate::score`]) within `margin` of
+/// the best score whose flows differ on average by more than 1 px (full resolution) from
+/// every better one kept: fits that converged to one basin are refined once.
+fn distinct_fits(level: &Level, fits: Vec<Candidate>, keep: usize, margin: f32) -> Vec<Candidate> {
+    let mut kept: Vec<Candidate> = Vec::with_capacity(keep);
+    let best = fits.first().map_or(f64::NEG_INFINITY, Candidate::score);
     for fit in fits {
-        if kept.len() >= keep || score(&fit) < best - margin as f64 {
+        if kept.len() >= keep || fit.score() < best - margin as f64 {
             break;
         }
         if kept
             .iter()
-            .all(|(k, _, _)| mean_flow_change(level, k, &fit.0) > 1.0)
+            .all(|k| mean_flow_change(level, &k.theta, &fit.theta) > 1.0)
         {
             kept.push(fit);
         }
@@ -1602,13 +1620,16 @@ mod tests {
                 cx,
                 ..Calibration::IDENTITY
             };
-            (Theta::from(c), corr, 0.0)
+            Candidate {
+                theta: Theta::from(c),
+                correlation: corr,
+                handicap: 0.0,
+            }
         };
         // Best first: the best basin, a second start that converged into it (0.3 px away), a
         // distinct basin within the margin, and one beyond it.
         let fits = vec![at(0.0, 0.60), at(0.3, 0.59), at(3.0, 0.58), at(-4.0, 0.50)];
-        let cx =
-            |kept: Vec<(Theta, f64, f64)>| kept.iter().map(|(t, ..)| t.p[2]).collect::<Vec<_>>();
+        let cx = |kept: Vec<Candidate>| kept.iter().map(|c| c.theta.p[2]).collect::<Vec<_>>();
         assert_eq!(cx(distinct_fits(&level, fits.clone(), 3, 0.05)), [0.0, 3.0]);
         assert_eq!(
             cx(distinct_fits(&level, fits.clone(), 3, 1.0)),
@@ -1617,7 +1638,10 @@ mod tests {
         assert_eq!(cx(distinct_fits(&level, fits, 1, 1.0)), [0.0]);
         // A handicapped fit (from the reference's search) is judged by its correlation less
         // the handicap: 0.62 − 0.03 is within 0.05 of the best but not within 0.005.
-        let handicapped = (at(3.0, 0.62).0, 0.62, 0.03);
+        let handicapped = Candidate {
+            handicap: 0.03,
+            ..at(3.0, 0.62)
+        };
         let fits = vec![at(0.0, 0.60), handicapped, at(-4.0, 0.50)];
         assert_eq!(cx(distinct_fits(&level, fits.clone(), 3, 0.05)), [0.0, 3.0]);
         assert_eq!(cx(distinct_fits(&level, fits, 3, 0.005)), [0.0]);
