@@ -15,8 +15,9 @@
 //! residuals, the splat) run on a rayon pool of the worker's own, as many threads as the
 //! caller's pool and each at the worker's priority: on the global pool they would run on the
 //! frame path's threads at its priority, and a frame's stages would wait behind them. With
-//! frames overlapping, the frame path keeps both cores busy when it falls behind, and at nice +10 the worker's 0.3 s measurement every 30 frames still slowed
-//! the frames around it: `deard-bench` at 640×480, 200 frames back to back, p95 82.5 / 78.6 ms
+//! frames overlapping, the frame path keeps both cores busy when it falls behind, and at nice
+//! +10 the worker's 0.3 s measurement every 30 frames still slowed the frames around it:
+//! `deard-bench` at 640×480, 200 frames back to back, p95 82.5 / 78.6 ms
 //! and median 43.8 / 44.7 at +10 against 56.8 / 53.2 and 41.2 / 39.0 at +19 (alternating
 //! runs, 2026-11-26). The price is paid only under that overload: the worker delivered 2–3
 //! measurements in those 200 frames instead of 7–8; a daemon that keeps up leaves idle time
