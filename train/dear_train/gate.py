@@ -4,6 +4,7 @@
 
     dear-gate train --data DATA/gate-train/shard-* --val DATA/gate-val/shard-* --out runs/gate
     dear-gate attach --bundle models/edge --gate runs/gate/gate.pt
+    dear-gate attach --bundle runs/retrained-bundle --gate-from models/edge
     dear-gate score --gate runs/gate/gate.pt --data MY_RECORDING
     dear-gate detach --bundle models/edge --out edge-without-gate
 
@@ -12,7 +13,9 @@ multi-path from frames without, on rendered family shards (``dear-synth family``
 of a shard is whether its simulation rendered indirect light (``max_bounces > 1`` in its
 ``capture.json``). ``attach`` appends the gate to the bundle's hybrid refine graph
 (:func:`compose`), checks the result against onnxruntime and PyTorch, and records the gate in
-``model.json``; the refiner's own weights are not touched.
+``model.json``; the refiner's own weights are not touched. ``attach --gate-from`` takes the
+gate out of another bundle's refine graph instead of a checkpoint (a retrained refiner keeps the
+gate it shipped with).
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import json
 import shutil
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -315,11 +319,42 @@ def as_applied(maps: np.ndarray) -> np.ndarray:
     return out
 
 
+#: What a composed graph is checked against: ``(amplitude, depth, maps)`` → the gated maps.
+GateReference = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+
+
+def torch_reference(gate: MultipathGate) -> GateReference:
+    """The gate as trained: :class:`GateOnMaps` in PyTorch."""
+
+    def run(amplitude: np.ndarray, depth: np.ndarray, maps: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return GateOnMaps(gate)(
+                *(torch.from_numpy(x) for x in (amplitude, depth, maps))
+            ).numpy()
+
+    return run
+
+
+def onnx_reference(gate_graph: onnx.ModelProto) -> GateReference:
+    """A gate graph taken out of another bundle (:func:`gate_graph_of`), run on its own."""
+    import onnxruntime as ort
+
+    session = ort.InferenceSession(
+        gate_graph.SerializeToString(), providers=["CPUExecutionProvider"]
+    )
+
+    def run(amplitude: np.ndarray, depth: np.ndarray, maps: np.ndarray) -> np.ndarray:
+        (out,) = session.run(None, {"amplitude": amplitude, "depth": depth, "maps": maps})
+        return out
+
+    return run
+
+
 def check_composed(
-    original: Path, composed: Path, gate: MultipathGate, feeds: list[dict[str, np.ndarray]]
+    original: Path, composed: Path, reference: GateReference, feeds: list[dict[str, np.ndarray]]
 ) -> float:
-    """Max |composed − (original maps gated in PyTorch)| over the refine graph's ``feeds``,
-    compared :func:`as_applied`."""
+    """Max |composed − (original maps gated by ``reference``)| over the refine graph's
+    ``feeds``, compared :func:`as_applied`."""
     import onnxruntime as ort
 
     before = ort.InferenceSession(str(original), providers=["CPUExecutionProvider"])
@@ -328,11 +363,7 @@ def check_composed(
     for feed in feeds:
         (maps,) = before.run(None, feed)
         (got,) = after.run(None, feed)
-        with torch.no_grad():
-            want = GateOnMaps(gate)(
-                *(torch.from_numpy(feed[n]) for n in ("amplitude", "depth")),
-                torch.from_numpy(maps),
-            ).numpy()
+        want = reference(feed["amplitude"], feed["depth"], maps)
         worst = max(worst, float(np.abs(as_applied(got) - as_applied(want)).max()))
     if not worst <= CHECK_ATOL:
         raise RuntimeError(f"{composed}: differs from the gated maps by {worst:.3g} > {CHECK_ATOL}")
@@ -366,40 +397,112 @@ def attach(args: argparse.Namespace) -> None:
         )
     if "multipath_gate" in manifest:
         raise ValueError(f"{manifest_path}: the refine graph already has a multi-path gate")
-    gate, ckpt = load_gate(args.gate)
+    if args.gate is not None:
+        gate, ckpt = load_gate(args.gate)
+        history = ckpt.get("history", [])
+        record = {
+            "what": "a frame-level CNN (train/dear_train/models/multipath_gate.py) inside "
+            f"refine.onnx: the refine inputs averaged onto a {GRID[0]}x{GRID[1]} grid give p, "
+            "the probability that the frame has multi-path; the maps are then scaled by p: "
+            f"tanh(maps[9]) becomes p times itself, sigmoid(maps[10]) ({SMOOTHING_FLOOR} + "
+            f"{1 - SMOOTHING_FLOOR} p) times itself, maps[12] becomes maps[12] + 2 log(p) "
+            "(gate_maps in that file)",
+            "params": param_count(gate),
+            "recipe": ckpt.get("recipe", {}),
+            "last_epoch": history[-1] if history else None,
+        }
+        with tempfile.TemporaryDirectory() as tmp:
+            gate_path = Path(tmp) / "gate-on-maps.onnx"
+            export_gate_graph(gate, apply["channels"], gate_path)
+            gate_graph = onnx.load(str(gate_path))
+        reference = torch_reference(gate)
+    else:
+        gate_graph, donor = gate_graph_of(args.gate_from)
+        if donor["graphs"]["refine"]["apply"].get("channels") != apply["channels"]:
+            raise ValueError(
+                f"{args.gate_from / 'model.json'}: its gate scales "
+                f"{donor['graphs']['refine']['apply'].get('channels')} maps, "
+                f"{manifest_path}'s refiner has {apply['channels']}"
+            )
+        record = dict(donor["multipath_gate"], copied_from=str(args.gate_from))
+        reference = onnx_reference(gate_graph)
     path = bundle / entry["file"]
     with tempfile.TemporaryDirectory() as tmp:
         original = Path(tmp) / "refine-ungated.onnx"
         original.write_bytes(path.read_bytes())
-        gate_path = Path(tmp) / "gate-on-maps.onnx"
-        export_gate_graph(gate, apply["channels"], gate_path)
-        composed = compose(onnx.load(str(path)), onnx.load(str(gate_path)))
+        composed = compose(onnx.load(str(path)), gate_graph)
         onnx.save(composed, str(path))
         try:
             feeds = refine_feeds(manifest, [(96, 128), (64, 80), (240, 320)])
-            diff = check_composed(original, path, gate, feeds)
+            diff = check_composed(original, path, reference, feeds)
         except Exception:
             # Never leave a bundle whose graph and manifest disagree.
             path.write_bytes(original.read_bytes())
             raise
-    entry["params"] = int(entry["params"]) + param_count(gate)
+    entry["params"] = int(entry["params"]) + int(record["params"])
     entry["bytes"] = path.stat().st_size
     entry["sha256"] = sha256(path)
     entry.setdefault("check", {})["gate_max_abs_diff"] = diff
     entry["outputs"][0]["meaning"] += MEANING_SUFFIX
-    history = ckpt.get("history", [])
-    manifest["multipath_gate"] = {
-        "what": "a frame-level CNN (train/dear_train/models/multipath_gate.py) inside refine.onnx: "
-        f"the refine inputs averaged onto a {GRID[0]}x{GRID[1]} grid give p, the probability "
-        "that the frame has multi-path; the maps are then scaled by p: tanh(maps[9]) becomes "
-        f"p times itself, sigmoid(maps[10]) ({SMOOTHING_FLOOR} + {1 - SMOOTHING_FLOOR} p) "
-        "times itself, maps[12] becomes maps[12] + 2 log(p) (gate_maps in that file)",
-        "params": param_count(gate),
-        "recipe": ckpt.get("recipe", {}),
-        "last_epoch": history[-1] if history else None,
-    }
+    manifest["multipath_gate"] = record
     manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
-    print(f"dear-gate: {path} gated ({param_count(gate)} parameters, max |diff| {diff:.2g})")
+    print(f"dear-gate: {path} gated ({record['params']} parameters, max |diff| {diff:.2g})")
+
+
+def gate_graph_of(bundle: Path) -> tuple[onnx.ModelProto, dict]:
+    """The multi-path gate inside ``bundle``'s refine graph as a graph of its own (inputs
+    ``amplitude, depth, maps``, output ``gated_maps``, as :func:`export_gate_graph` writes),
+    and ``bundle``'s manifest: so that a retrained refiner can take the gate a bundle ships
+    with (``dear-gate attach --gate-from``) without the gate's checkpoint."""
+    manifest_path = bundle / "model.json"
+    manifest = json.loads(manifest_path.read_text())
+    if "multipath_gate" not in manifest:
+        raise ValueError(f"{manifest_path}: the refine graph has no multi-path gate to copy")
+    model = onnx.load(str(bundle / manifest["graphs"]["refine"]["file"]))
+    (out,) = model.graph.output
+
+    def own(name: str) -> str:
+        if name == UNGATED:
+            return "maps"
+        if name == out.name:
+            return "gated_maps"
+        return name.removeprefix(PREFIX)
+
+    nodes = []
+    for node in model.graph.node:
+        if node.name.startswith(PREFIX):
+            copy = onnx.NodeProto()
+            copy.CopyFrom(node)
+            copy.name = own(node.name)
+            copy.input[:] = [own(i) for i in node.input]
+            copy.output[:] = [own(o) for o in node.output]
+            nodes.append(copy)
+    inits = []
+    for init in model.graph.initializer:
+        if init.name.startswith(PREFIX):
+            copy = onnx.TensorProto()
+            copy.CopyFrom(init)
+            copy.name = own(init.name)
+            inits.append(copy)
+    if not nodes or not any("maps" in n.input for n in nodes):
+        raise ValueError(f"{bundle}: its refine graph has no {PREFIX} nodes reading the maps")
+    channels = manifest["graphs"]["refine"]["apply"]["channels"]
+    f32 = onnx.TensorProto.FLOAT
+    graph = onnx.helper.make_graph(
+        nodes,
+        "multipath_gate",
+        [
+            onnx.helper.make_tensor_value_info("amplitude", f32, ["N", 1, "H", "W"]),
+            onnx.helper.make_tensor_value_info("depth", f32, ["N", 1, "H", "W"]),
+            onnx.helper.make_tensor_value_info("maps", f32, ["N", channels, "h", "w"]),
+        ],
+        [onnx.helper.make_tensor_value_info("gated_maps", f32, ["N", channels, "h", "w"])],
+        inits,
+    )
+    gate_graph = onnx.helper.make_model(graph, opset_imports=list(model.opset_import))
+    gate_graph.ir_version = model.ir_version
+    onnx.checker.check_model(gate_graph)
+    return gate_graph, manifest
 
 
 def detach(args: argparse.Namespace) -> None:
@@ -473,7 +576,13 @@ def main(argv: list[str] | None = None) -> None:
     )
     a = sub.add_parser("attach", help="append a trained gate to a bundle's refine graph")
     a.add_argument("--bundle", type=Path, required=True, help="bundle directory (edited)")
-    a.add_argument("--gate", type=Path, required=True, help="gate.pt from `dear-gate train`")
+    source = a.add_mutually_exclusive_group(required=True)
+    source.add_argument("--gate", type=Path, help="gate.pt from `dear-gate train`")
+    source.add_argument(
+        "--gate-from",
+        type=Path,
+        help="a gated bundle whose gate is copied (e.g. a retrained refiner keeps models/edge's)",
+    )
     d = sub.add_parser("detach", help="copy a bundle with the gate taken out (for comparison)")
     d.add_argument("--bundle", type=Path, required=True, help="bundle with a gate")
     d.add_argument("--out", type=Path, required=True, help="new bundle directory")

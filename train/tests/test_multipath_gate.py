@@ -153,6 +153,57 @@ def test_attach_puts_the_gate_into_the_refine_graph(
     )
 
 
+def test_a_retrained_refiner_takes_the_gate_another_bundle_ships_with(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    donor = hybrid_bundle(tmp_path)
+    path, gate = saved_gate(tmp_path)
+    cli.main(["attach", "--bundle", str(donor), "--gate", str(path)])
+    (tmp_path / "retrained").mkdir()
+    torch.manual_seed(7)  # other refiner weights than the donor's
+    bundle = hybrid_bundle(tmp_path / "retrained")
+    original = tmp_path / "retrained-ungated.onnx"
+    shutil.copy(bundle / "refine.onnx", original)
+    cli.main(["attach", "--bundle", str(bundle), "--gate-from", str(donor)])
+    manifest = json.loads((bundle / "model.json").read_text())
+    donor_manifest = json.loads((donor / "model.json").read_text())
+    assert manifest["multipath_gate"]["copied_from"] == str(donor)
+    assert manifest["multipath_gate"]["params"] == donor_manifest["multipath_gate"]["params"]
+    assert manifest["graphs"]["refine"]["sha256"] == cli.sha256(bundle / "refine.onnx")
+    # The retrained refiner's own maps, gated by the donor's gate as PyTorch computes it.
+    rng = np.random.default_rng(6)
+    feed = {
+        "amplitude": rng.random((1, 1, 64, 96), dtype=np.float32),
+        "depth": (1 + 3 * rng.random((1, 1, 64, 96))).astype(np.float32),
+        "rgb": rng.random((1, 3, 64, 96), dtype=np.float32),
+    }
+    feed["classical"] = feed["depth"] + np.float32(0.01)
+    run = lambda p: ort.InferenceSession(str(p), providers=["CPUExecutionProvider"])  # noqa: E731
+    (maps,) = run(original).run(None, feed)
+    (donor_maps,) = run(donor / "refine.onnx").run(None, feed)
+    (got,) = run(bundle / "refine.onnx").run(None, feed)
+    with torch.no_grad():
+        p = gate(torch.from_numpy(feed["amplitude"]), torch.from_numpy(feed["depth"]))
+        want = gate_maps(torch.from_numpy(maps), p).numpy()
+    assert np.abs(got - want).max() < 1e-4
+    assert np.abs(got - donor_maps).max() > 1e-3, "the donor's refiner came along"
+    # Taken out again: the retrained refiner, bit for bit.
+    cli.main(["detach", "--bundle", str(bundle), "--out", str(tmp_path / "again")])
+    (back,) = run(tmp_path / "again" / "refine.onnx").run(None, feed)
+    assert np.array_equal(back, maps)
+    # A donor without a gate, and a bundle that already has one, are named.
+    fails(
+        capsys,
+        ["attach", "--bundle", str(tmp_path / "again"), "--gate-from", str(tmp_path / "again")],
+        "no multi-path gate to copy",
+    )
+    fails(
+        capsys,
+        ["attach", "--bundle", str(bundle), "--gate-from", str(donor)],
+        "already has a multi-path gate",
+    )
+
+
 def test_attach_refuses_a_refiner_without_a_bias_map(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
