@@ -14,7 +14,7 @@ import torch
 
 from dear_train.export import export_bundle, export_refine_into
 from dear_train.training.checkpoint import build_model
-from dear_train.training.config import get_profile
+from dear_train.training.config import Profile, get_profile
 
 
 def random_refine_inputs(
@@ -171,3 +171,27 @@ def test_refiner_with_frame_level_context_exports_and_matches_onnxruntime(tmp_pa
             torch.from_numpy(classical / 10),
         )
     np.testing.assert_allclose(got, want.numpy(), atol=1e-4)
+
+
+def test_a_refiner_with_other_widths_is_rebuilt_from_its_recorded_profile(tmp_path: Path) -> None:
+    """``refine_widths`` travels in the profile a checkpoint records, so an export rebuilds the
+    same net, and the graph it writes carries those widths."""
+    profile = get_profile("smoke", variant="hybrid", refine_widths=(8, 16, 24, 40))
+    again = Profile.from_dict(json.loads(json.dumps(profile.to_dict())))
+    assert again == profile
+    model = build_model(again).eval()
+    assert model.refine is not None
+    state = model.refine.state_dict()
+    assert tuple(state["backbone.enc3.0.1.weight"].shape) == (40, 24, 1, 1)
+    assert (
+        build_model(get_profile("smoke", variant="hybrid"))
+        .refine.state_dict()["backbone.enc3.0.1.weight"]
+        .shape
+        != state["backbone.enc3.0.1.weight"].shape
+    )
+    out = tmp_path / "bundle"
+    export_bundle(model, again, out, {}, macs_at=None)
+    inits = {i.name: list(i.dims) for i in onnx.load(str(out / "refine.onnx")).graph.initializer}
+    assert inits["net.backbone.enc3.0.1.weight"] == [40, 24, 1, 1]
+    with pytest.raises(ValueError, match="edge tier only"):
+        build_model(get_profile("smoke", tier="paper", refine_widths=(8, 16, 24, 40)))

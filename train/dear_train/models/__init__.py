@@ -41,15 +41,20 @@ def build_fusion(tier: str) -> FusionNet:
     return FusionNet(FusionConfig()) if tier == "paper" else edge_fusion()
 
 
-def build_refine(tier: str, variant: str = "kpn", global_context: bool = False) -> RefineNet:
+def build_refine(
+    tier: str,
+    variant: str = "kpn",
+    global_context: bool = False,
+    widths: tuple[int, int, int, int] | None = None,
+) -> RefineNet:
     """The refinement net of ``tier`` and ``variant`` (``global_context``: the frame-level
-    context branch; edge tier only)."""
+    context branch; ``widths``: other channel widths per level; both edge tier only)."""
     _check_tier(tier)
     if tier == "paper":
-        if global_context:
-            raise ValueError("the frame-level context branch exists for the edge tier only")
+        if global_context or widths is not None:
+            raise ValueError("the context branch and other widths exist for the edge tier only")
         return paper_refine(variant)
-    return edge_refine(variant, global_context)
+    return edge_refine(variant, global_context, widths)
 
 
 def param_count(model: nn.Module) -> int:

@@ -49,8 +49,16 @@ def edge_fusion() -> FusionNet:
     return FusionNet(EDGE_FUSION)
 
 
-def edge_refine(variant: str = "kpn", global_context: bool = False) -> RefineNet:
+def edge_refine(
+    variant: str = "kpn",
+    global_context: bool = False,
+    widths: tuple[int, int, int, int] | None = None,
+) -> RefineNet:
     """The edge-tier refinement net (any variant of :mod:`dear_train.models.kpn`), optionally
-    with the frame-level context branch (:class:`~dear_train.models.kpn.UNetConfig`)."""
+    with the frame-level context branch (:class:`~dear_train.models.kpn.UNetConfig`) and other
+    channel widths per level."""
     config = EDGE_GATED_REFINE if applies_maps(variant) else EDGE_REFINE
-    return RefineNet(variant, replace(config, global_context=global_context))
+    config = replace(config, global_context=global_context)
+    if widths is not None:
+        config = replace(config, widths=tuple(widths))
+    return RefineNet(variant, config)

@@ -23,7 +23,7 @@ def build_model(profile: Profile) -> DEAR:
     return DEAR(
         build_flow(profile.tier),
         build_fusion(profile.tier),
-        build_refine(profile.tier, profile.variant, profile.refine_context),
+        build_refine(profile.tier, profile.variant, profile.refine_context, profile.refine_widths),
         profile.norm.max_depth,
     )
 

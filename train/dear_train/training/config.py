@@ -16,6 +16,10 @@ Profiles:
 - ``cpu-hybrid``: cpu-gated's recipe for the ``hybrid`` variant (the gated kernel on a learned
   per-pixel choice between the measurement and the classical filter); its captures need the
   classical planes (``dear-synth classical``).
+- ``cpu-hybrid-deep``: cpu-hybrid with the refiner's two coarsest levels twice as wide
+  (``refine_widths``).
+- ``cpu-hybrid-more``: cpu-hybrid continued from the shipped refiner (``--init-refine``) for
+  8 more epochs at the learning rate its schedule had reached.
 - ``cpu-guarded``: cpu-gated's recipe for the ``guarded`` variant (the hybrid refiner plus
   expected-error maps: each pixel publishes the candidate, refined / measured / classical, with
   the smallest expected error), on the ``broad`` family.
@@ -81,6 +85,8 @@ class Profile:
     num_workers: int = 2
     #: The refiner's frame-level context branch (``UNetConfig.global_context``; edge tier).
     refine_context: bool = False
+    #: The refiner's channel widths per level (edge tier; ``None``: ``models/edge.py``'s).
+    refine_widths: tuple[int, int, int, int] | None = None
     #: Weight of the ``guarded`` variant's harm term (``losses.guarded_losses``).
     harm_weight: float = 1.0
     seed: int = 0
@@ -90,6 +96,8 @@ class Profile:
     def to_dict(self) -> dict:
         d = asdict(self)
         d["crop"] = list(self.crop)
+        if self.refine_widths is not None:
+            d["refine_widths"] = list(self.refine_widths)
         return d
 
     @staticmethod
@@ -98,6 +106,9 @@ class Profile:
             **{
                 **d,
                 "crop": tuple(d["crop"]),
+                "refine_widths": (
+                    tuple(d["refine_widths"]) if d.get("refine_widths") is not None else None
+                ),
                 "stages": tuple(Stage(**s) for s in d["stages"]),
                 "augment": AugmentConfig(**d["augment"]),
                 "norm": Normalisation(**d["norm"]),
@@ -159,6 +170,21 @@ PROFILES: dict[str, Profile] = {
     ),
     "cpu-gated": CPU_GATED,
     "cpu-hybrid": replace(CPU_GATED, name="cpu-hybrid", variant="hybrid"),
+    # The hybrid refiner with its two coarsest levels (1/16 and 1/32 of the frame) twice as
+    # wide: capacity where it costs least.
+    "cpu-hybrid-deep": replace(
+        CPU_GATED, name="cpu-hybrid-deep", variant="hybrid", refine_widths=(16, 32, 64, 128)
+    ),
+    # More epochs for the shipped hybrid refiner: warm-started from it (``dear-train
+    # --init-refine models/edge``) on the same ``train`` family, at the learning rate its own
+    # schedule had reached (1e-3 × 0.7³), on other crops and misalignments (seed 1).
+    "cpu-hybrid-more": replace(
+        CPU_GATED,
+        name="cpu-hybrid-more",
+        variant="hybrid",
+        stages=(Stage("refine", 8, 3.4e-4),),
+        seed=1,
+    ),
     # Issue 33: the hybrid refiner with expected-error maps and the harm term (``guarded``),
     # trained on the ``broad`` family (bright single-bounce scenes and near-empty rooms too),
     # warm-started from the shipped hybrid refiner (``dear-train --init-refine models/edge``):
