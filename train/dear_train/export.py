@@ -526,23 +526,25 @@ def _zeros_at(inputs: tuple, size: tuple[int, int]) -> tuple:
 
 
 def recipe_record(ckpt: dict) -> dict:
-    """What ``model.json`` records of the run behind a checkpoint: data, frames, epochs trained
-    and the last validation.
+    """What ``model.json`` records of the run behind a checkpoint: data, frames, epochs trained,
+    the bundle a warm-started run began from, and the last validation.
 
     ``final.pt`` carries its metrics; a ``last.pt`` (a run stopped early, e.g. for time) only
     its history, so the last epoch's validation is taken from there and ``epochs_trained``
     says how far the run got, instead of leaving the schedule in the profile to speak for it.
     """
     history = ckpt.get("history", [])
+    training = {
+        "data": ckpt.get("data", []),
+        "frames": ckpt.get("frames", {}),
+        "epochs_trained": len(history),
+        "from": "final.pt" if "metrics" in ckpt else "last.pt (stopped before the schedule ended)",
+    }
+    if "warm_start" in ckpt:
+        # The epochs above came after these (``dear-train --init-refine``).
+        training["warm_start"] = ckpt["warm_start"]
     return {
-        "training": {
-            "data": ckpt.get("data", []),
-            "frames": ckpt.get("frames", {}),
-            "epochs_trained": len(history),
-            "from": "final.pt"
-            if "metrics" in ckpt
-            else "last.pt (stopped before the schedule ended)",
-        },
+        "training": training,
         "validation": ckpt.get("metrics", history[-1]["val"] if history else {}),
     }
 

@@ -96,3 +96,35 @@ def test_a_stage_ends_when_its_time_budget_is_spent(capture_dir: Path, tmp_path:
     assert (last["stage_index"], last["next_epoch"]) == (2, 0)
     with pytest.raises(ValueError, match="max_seconds must be positive"):
         Stage("flow", 1, 1e-3, max_seconds=0)
+
+
+def test_a_warm_started_run_keeps_its_lineage_through_the_export(
+    capture_dir: Path, tmp_path: Path
+) -> None:
+    """``--init-refine``: the checkpoints and the exported ``model.json`` name the bundle the
+    run began from, its refine graph's checksum and that bundle's own recipe, so a refiner
+    trained in sittings (bundle → run → bundle → run) keeps its whole history."""
+    from dear_train.training.config import Stage, get_profile
+    from dear_train.training.trainer import Trainer
+
+    # The refine stage alone: the lineage is the same for any schedule, and it is quick.
+    profile = get_profile("smoke", stages=(Stage("refine", 1, 1e-3),))
+
+    def train_and_export(name: str, init: Path | None) -> dict:
+        run = tmp_path / f"run-{name}"
+        Trainer(profile, [capture_dir], run, init_refine=init).run()
+        bundle = tmp_path / f"bundle-{name}"
+        export_main(["--checkpoint", str(run / "final.pt"), "--out", str(bundle), "--no-check"])
+        return json.loads((bundle / "model.json").read_text())
+
+    first = train_and_export("first", None)
+    assert "warm_start" not in first["training"]
+    second = train_and_export("second", tmp_path / "bundle-first")
+    start = second["training"]["warm_start"]
+    assert start["bundle"] == str(tmp_path / "bundle-first")
+    assert start["refine_sha256"] == first["graphs"]["refine"]["sha256"]
+    assert start["training"]["epochs_trained"] == first["training"]["epochs_trained"]
+    assert load(tmp_path / "run-second" / "checkpoints" / "last.pt")["warm_start"] == start
+    third = train_and_export("third", tmp_path / "bundle-second")
+    lineage = third["training"]["warm_start"]["training"]["warm_start"]
+    assert lineage["bundle"] == str(tmp_path / "bundle-first")

@@ -8,6 +8,7 @@ and ``dear-evaluate`` read it.
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -52,6 +53,7 @@ def training_state(
     optimizer: dict,
     scheduler: dict,
     history: list[dict],
+    **extra: object,
 ) -> dict:
     """The contents of ``last.pt``: everything a run needs to resume at ``(stage, epoch)``."""
     return {
@@ -63,6 +65,7 @@ def training_state(
         "optimizer": optimizer,
         "scheduler": scheduler,
         "history": history,
+        **extra,
     }
 
 
@@ -102,6 +105,23 @@ def load_model(path: Path) -> tuple[DEAR, Profile]:
     model.load_state_dict(ckpt["model"])
     model.eval()
     return model, profile
+
+
+def warm_start_record(bundle: Path) -> dict:
+    """What a warm-started run records of its start (``warm_start`` in its checkpoints, then in
+    the exported ``model.json``): the bundle, its refine graph's SHA-256 and that bundle's own
+    refine recipe, which names *its* start in turn, so a refiner trained in several sittings
+    keeps its whole lineage. A bundle without a readable manifest records only its path."""
+    record: dict = {"bundle": str(bundle)}
+    try:
+        manifest = json.loads((Path(bundle) / "model.json").read_text())
+    except (OSError, ValueError):
+        return record
+    refine = manifest.get("graphs", {}).get("refine", {})
+    record["refine_sha256"] = refine.get("sha256")
+    training = manifest.get("training", {})
+    record["training"] = training.get("refine", training)
+    return record
 
 
 def warm_start_refine(model: DEAR, bundle: Path) -> list[str]:

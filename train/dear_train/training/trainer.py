@@ -33,6 +33,7 @@ from dear_train.training.checkpoint import (
     load_resumable,
     save_atomic,
     training_state,
+    warm_start_record,
     warm_start_refine,
 )
 from dear_train.training.config import Profile, Stage
@@ -193,6 +194,9 @@ class Trainer:
         self.history: list[dict] = []
         self.position = (0, 0)  # (stage index, next epoch)
         self.resume_state: dict | None = None
+        #: The bundle a warm-started run began from (``warm_start_record``), kept in every
+        #: checkpoint so that a resumed run and its export still name it.
+        self.warm_start: dict | None = None
         last = self.out / "checkpoints" / "last.pt"
         if resume and last.exists():
             ckpt = load_resumable(last, profile)
@@ -200,8 +204,10 @@ class Trainer:
             self.history = ckpt["history"]
             self.position = (ckpt["stage_index"], ckpt["next_epoch"])
             self.resume_state = ckpt
+            self.warm_start = ckpt.get("warm_start")
         elif init_refine is not None:
             copied = warm_start_refine(self.model, init_refine)
+            self.warm_start = warm_start_record(init_refine)
             if self.dist.is_main:
                 self.out.mkdir(parents=True, exist_ok=True)
                 (self.out / "init_refine.json").write_text(
@@ -216,6 +222,9 @@ class Trainer:
         )
         return data_loader(dataset, self.profile, shuffle, sampler)
 
+    def _provenance(self) -> dict:
+        return {} if self.warm_start is None else {"warm_start": self.warm_start}
+
     def _save(self, path: Path, stage_index: int, next_epoch: int, opt: dict, sched: dict) -> None:
         if not self.dist.is_main:
             return
@@ -229,6 +238,7 @@ class Trainer:
                 opt,
                 sched,
                 self.history,
+                **self._provenance(),
             ),
             path,
         )
@@ -351,6 +361,7 @@ class Trainer:
             self.model,
             {"train": len(self.train_set), "val": len(self.val_set), "skipped": self.skipped},
             self.history,
+            **self._provenance(),
         )
         if main:
             save_atomic(state, self.out / "final.pt")
