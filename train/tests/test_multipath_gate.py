@@ -94,6 +94,22 @@ def saved_gate(tmp_path: Path) -> tuple[Path, MultipathGate]:
     return path, gate.eval()
 
 
+def refine_feed(seed: int) -> dict[str, np.ndarray]:
+    """Random inputs of a hybrid refine graph at 64 × 96, the classical plane 1 cm off."""
+    rng = np.random.default_rng(seed)
+    feed = {
+        "amplitude": rng.random((1, 1, 64, 96), dtype=np.float32),
+        "depth": (1 + 3 * rng.random((1, 1, 64, 96))).astype(np.float32),
+        "rgb": rng.random((1, 3, 64, 96), dtype=np.float32),
+    }
+    feed["classical"] = feed["depth"] + np.float32(0.01)
+    return feed
+
+
+def session(path: Path) -> ort.InferenceSession:
+    return ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+
+
 def test_attach_puts_the_gate_into_the_refine_graph(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -111,19 +127,12 @@ def test_attach_puts_the_gate_into_the_refine_graph(
     assert after["multipath_gate"]["params"] == sum(p.numel() for p in gate.parameters())
     assert after["graphs"]["flow"] == before["graphs"]["flow"]
     # The composed graph: the same inputs and output names, the maps gated by the frame's p.
-    rng = np.random.default_rng(5)
-    feed = {
-        "amplitude": rng.random((1, 1, 64, 96), dtype=np.float32),
-        "depth": (1 + 3 * rng.random((1, 1, 64, 96))).astype(np.float32),
-        "rgb": rng.random((1, 3, 64, 96), dtype=np.float32),
-    }
-    feed["classical"] = feed["depth"] + np.float32(0.01)
-    run = lambda p: ort.InferenceSession(str(p), providers=["CPUExecutionProvider"])  # noqa: E731
-    composed = run(bundle / "refine.onnx")
+    feed = refine_feed(5)
+    composed = session(bundle / "refine.onnx")
     assert [o.name for o in composed.get_outputs()] == [
         o["name"] for o in before["graphs"]["refine"]["outputs"]
     ]
-    (maps,) = run(original).run(None, feed)
+    (maps,) = session(original).run(None, feed)
     (got,) = composed.run(None, feed)
     with torch.no_grad():
         p = gate(torch.from_numpy(feed["amplitude"]), torch.from_numpy(feed["depth"]))
@@ -139,7 +148,7 @@ def test_attach_puts_the_gate_into_the_refine_graph(
     # Taken out again: the refiner's own maps, bit for bit, and the manifest says so.
     without = tmp_path / "without"
     cli.main(["detach", "--bundle", str(bundle), "--out", str(without)])
-    (back,) = run(without / "refine.onnx").run(None, feed)
+    (back,) = session(without / "refine.onnx").run(None, feed)
     assert np.array_equal(back, maps)
     detached = json.loads((without / "model.json").read_text())
     assert "multipath_gate" not in detached
@@ -171,17 +180,10 @@ def test_a_retrained_refiner_takes_the_gate_another_bundle_ships_with(
     assert manifest["multipath_gate"]["params"] == donor_manifest["multipath_gate"]["params"]
     assert manifest["graphs"]["refine"]["sha256"] == cli.sha256(bundle / "refine.onnx")
     # The retrained refiner's own maps, gated by the donor's gate as PyTorch computes it.
-    rng = np.random.default_rng(6)
-    feed = {
-        "amplitude": rng.random((1, 1, 64, 96), dtype=np.float32),
-        "depth": (1 + 3 * rng.random((1, 1, 64, 96))).astype(np.float32),
-        "rgb": rng.random((1, 3, 64, 96), dtype=np.float32),
-    }
-    feed["classical"] = feed["depth"] + np.float32(0.01)
-    run = lambda p: ort.InferenceSession(str(p), providers=["CPUExecutionProvider"])  # noqa: E731
-    (maps,) = run(original).run(None, feed)
-    (donor_maps,) = run(donor / "refine.onnx").run(None, feed)
-    (got,) = run(bundle / "refine.onnx").run(None, feed)
+    feed = refine_feed(6)
+    (maps,) = session(original).run(None, feed)
+    (donor_maps,) = session(donor / "refine.onnx").run(None, feed)
+    (got,) = session(bundle / "refine.onnx").run(None, feed)
     with torch.no_grad():
         p = gate(torch.from_numpy(feed["amplitude"]), torch.from_numpy(feed["depth"]))
         want = gate_maps(torch.from_numpy(maps), p).numpy()
@@ -189,7 +191,7 @@ def test_a_retrained_refiner_takes_the_gate_another_bundle_ships_with(
     assert np.abs(got - donor_maps).max() > 1e-3, "the donor's refiner came along"
     # Taken out again: the retrained refiner, bit for bit.
     cli.main(["detach", "--bundle", str(bundle), "--out", str(tmp_path / "again")])
-    (back,) = run(tmp_path / "again" / "refine.onnx").run(None, feed)
+    (back,) = session(tmp_path / "again" / "refine.onnx").run(None, feed)
     assert np.array_equal(back, maps)
     # A donor without a gate, and a bundle that already has one, are named.
     fails(
