@@ -449,6 +449,21 @@ def attach(args: argparse.Namespace) -> None:
     print(f"dear-gate: {path} gated ({record['params']} parameters, max |diff| {diff:.2g})")
 
 
+def split_gate(
+    graph: onnx.GraphProto,
+) -> tuple[
+    list[onnx.NodeProto], list[onnx.NodeProto], list[onnx.TensorProto], list[onnx.TensorProto]
+]:
+    """A composed refine graph's nodes and initializers as (the refiner's nodes, the gate's
+    nodes, the refiner's initializers, the gate's initializers): :func:`compose` names
+    everything of the gate under :data:`PREFIX`."""
+    nodes = [n for n in graph.node if not n.name.startswith(PREFIX)]
+    gate_nodes = [n for n in graph.node if n.name.startswith(PREFIX)]
+    inits = [i for i in graph.initializer if not i.name.startswith(PREFIX)]
+    gate_inits = [i for i in graph.initializer if i.name.startswith(PREFIX)]
+    return nodes, gate_nodes, inits, gate_inits
+
+
 def gate_graph_of(bundle: Path) -> tuple[onnx.ModelProto, dict]:
     """The multi-path gate inside ``bundle``'s refine graph as a graph of its own (inputs
     ``amplitude, depth, maps``, output ``gated_maps``, as :func:`export_gate_graph` writes),
@@ -468,22 +483,14 @@ def gate_graph_of(bundle: Path) -> tuple[onnx.ModelProto, dict]:
             return "gated_maps"
         return name.removeprefix(PREFIX)
 
-    nodes = []
-    for node in model.graph.node:
-        if node.name.startswith(PREFIX):
-            copy = onnx.NodeProto()
-            copy.CopyFrom(node)
-            copy.name = own(node.name)
-            copy.input[:] = [own(i) for i in node.input]
-            copy.output[:] = [own(o) for o in node.output]
-            nodes.append(copy)
-    inits = []
-    for init in model.graph.initializer:
-        if init.name.startswith(PREFIX):
-            copy = onnx.TensorProto()
-            copy.CopyFrom(init)
-            copy.name = own(init.name)
-            inits.append(copy)
+    # The model was loaded for this alone: its gate's protos are renamed where they stand.
+    _, nodes, _, inits = split_gate(model.graph)
+    for node in nodes:
+        node.name = own(node.name)
+        node.input[:] = [own(i) for i in node.input]
+        node.output[:] = [own(o) for o in node.output]
+    for init in inits:
+        init.name = own(init.name)
     if not nodes or not any("maps" in n.input for n in nodes):
         raise ValueError(f"{bundle}: its refine graph has no {PREFIX} nodes reading the maps")
     channels = manifest["graphs"]["refine"]["apply"]["channels"]
@@ -521,12 +528,11 @@ def detach(args: argparse.Namespace) -> None:
     path = args.out / entry["file"]
     model = onnx.load(str(path))
     (out,) = model.graph.output
-    kept = [n for n in model.graph.node if not n.name.startswith(PREFIX)]
+    kept, _, inits, _ = split_gate(model.graph)
     for node in kept:
         node.output[:] = [out.name if o == UNGATED else o for o in node.output]
     del model.graph.node[:]
     model.graph.node.extend(kept)
-    inits = [i for i in model.graph.initializer if not i.name.startswith(PREFIX)]
     del model.graph.initializer[:]
     model.graph.initializer.extend(inits)
     onnx.checker.check_model(model)
