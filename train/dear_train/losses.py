@@ -130,6 +130,15 @@ def laplace_nll(err: torch.Tensor, scale: torch.Tensor, mask: torch.Tensor) -> t
     return masked_mean(err / scale + torch.log(scale), mask)
 
 
+def harm(
+    refined: torch.Tensor, measured_depth: torch.Tensor, gt: torch.Tensor, mask: torch.Tensor
+) -> torch.Tensor:
+    """Mean over ``mask`` of how much further from the truth the refinement is than the
+    measurement it was given (metres): zero wherever the refiner helps, so it charges only the
+    damage a refiner does to depth the sensor already got right (issue 33's low-error quarter)."""
+    return masked_mean(F.relu((refined - gt).abs() - (measured_depth - gt).abs()), mask)
+
+
 def guarded_losses(
     r: dict[str, torch.Tensor],
     gt: torch.Tensor,
@@ -151,14 +160,13 @@ def guarded_losses(
     refined, d, c = r["depth_refined"], r["depth_warped"], r["depth_classical"]
     errors = r["errors"]
     e_refined = (refined - gt).abs()
-    e_measured = (d - gt).abs()
     nll = (
         laplace_nll(e_refined.detach(), errors[:, 0:1], depth_valid & (refined > 0))
-        + laplace_nll(e_measured, errors[:, 1:2], measured)
+        + laplace_nll((d - gt).abs(), errors[:, 1:2], measured)
         + laplace_nll((c - gt).abs(), errors[:, 2:3], depth_valid & (c > 0))
     )
     return {
         "depth": depth_term(refined, gt, measured),
-        "harm": harm_weight * masked_mean(F.relu(e_refined - e_measured), measured),
+        "harm": harm_weight * harm(refined, d, gt, measured),
         "error": ERROR_NLL_WEIGHT * nll,
     }

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from dear_train.losses import HARM_WEIGHT, depth_loss, guarded_losses
+from dear_train.losses import HARM_WEIGHT, depth_loss, guarded_losses, harm
 from dear_train.models import build_refine
 from dear_train.models.kpn import (
     GUARDED_CHANNELS,
@@ -156,6 +156,43 @@ def test_nograd_trains_without_the_gradient_term() -> None:
     pred = model.refine_depth(b["rgb"], b["amplitude"], b["tof_depth"], b["flow"])["depth"]
     assert torch.isclose(loss, depth_loss(pred, b["gt_depth"], b["flow_valid"], lam=0.0))
     assert not torch.isclose(loss, depth_loss(pred, b["gt_depth"], b["flow_valid"]))
+
+
+def test_hybrid_pays_the_harm_term_only_when_its_profile_asks() -> None:
+    """cpu-hybrid-harm's loss is the depth term plus the weighted damage to depth the sensor
+    already got right; a hybrid profile without a harm weight trains on the depth term alone,
+    and a recorded profile from before the field keeps that meaning."""
+    from dear_train.models.dear import DEAR
+    from dear_train.training.config import Profile, get_profile
+
+    torch.manual_seed(0)
+    model = DEAR(None, None, build_refine("edge", "hybrid"), 10.0)
+    gt = torch.rand(1, 1, 16, 16) + 1
+    b = {
+        "rgb": torch.rand(1, 3, 16, 16),
+        "amplitude": torch.rand(1, 1, 16, 16),
+        # Half the pixels measured exactly, half 5 cm off: the refiner harms the first half.
+        "tof_depth": gt + torch.where(torch.rand_like(gt) < 0.5, 0.0, 0.05),
+        "tof_classical": gt + 0.02,
+        "gt_depth": gt,
+        "flow": torch.zeros(1, 2, 16, 16),
+        "flow_valid": torch.ones(1, 1, 16, 16, dtype=torch.bool),
+    }
+    harm_profile = get_profile("cpu-hybrid-harm")
+    assert harm_profile.refine_harm_weight() == 1.0
+    assert get_profile("cpu-hybrid").refine_harm_weight() == 0.0
+    assert get_profile("cpu-guarded").refine_harm_weight() == HARM_WEIGHT
+    recorded = get_profile("cpu-hybrid-more").to_dict()
+    del recorded["hybrid_harm_weight"]
+    assert Profile.from_dict(recorded).refine_harm_weight() == 0.0
+
+    _, plain = StageLoss(model, "refine", "hybrid", 0.0)(b)
+    total, parts = StageLoss(model, "refine", "hybrid", 3.0)(b)
+    r = model.refine_depth(b["rgb"], b["amplitude"], b["tof_depth"], b["flow"], b["tof_classical"])
+    damage = float(harm(r["depth"], r["depth_warped"], gt, b["flow_valid"]).detach())
+    assert "harm" not in plain and damage > 0
+    assert parts["harm"] == pytest.approx(3.0 * damage, rel=1e-5)
+    assert float(total.detach()) == pytest.approx(plain["depth"] + 3.0 * damage, rel=1e-5)
 
 
 def _gated_maps(

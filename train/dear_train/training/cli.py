@@ -58,7 +58,8 @@ def main(argv: list[str] | None = None) -> None:
         "--harm-weight",
         type=float,
         default=None,
-        help="override the profile's weight of the guarded refiner's harm term",
+        help="override the profile's weight of the harm term (the guarded refiner's, or the "
+        "hybrid refiner's: 0 turns it off)",
     )
     p.add_argument("--device", default=None, help="cpu, cuda, cuda:1 (default: auto)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoints/last.pt")
@@ -87,6 +88,7 @@ def main(argv: list[str] | None = None) -> None:
         if not a.harm_weight >= 0:
             p.error(f"--harm-weight must be a non-negative number, not {a.harm_weight}")
         overrides["harm_weight"] = a.harm_weight
+        overrides["hybrid_harm_weight"] = a.harm_weight
     profile = get_profile(a.profile, **overrides)
     if a.variants:
         if a.variant:

@@ -22,6 +22,7 @@ from dear_train.losses import (
     depth_loss,
     flownet_weights,
     guarded_losses,
+    harm,
     multiscale_flow_loss,
 )
 from dear_train.models.dear import DEAR
@@ -92,6 +93,10 @@ class StageLoss(nn.Module):
                 )
             else:
                 parts["depth"] = self._depth(r["depth"], gt, measured)
+                if self.variant == "hybrid" and self.harm_weight > 0:
+                    parts["harm"] = self.harm_weight * harm(
+                        r["depth"], r["depth_warped"], gt, measured
+                    )
         else:
             assert m.flow is not None
             if self.stage == "flow":
@@ -271,7 +276,9 @@ class Trainer:
             if self.resume_state is not None and si == start_stage and first_epoch > 0:
                 opt.load_state_dict(self.resume_state["optimizer"])
                 sched.load_state_dict(self.resume_state["scheduler"])
-            loss_mod: nn.Module = StageLoss(self.model, stage.name, p.variant, p.harm_weight)
+            loss_mod: nn.Module = StageLoss(
+                self.model, stage.name, p.variant, p.refine_harm_weight()
+            )
             if self.dist.enabled:
                 loss_mod = DistributedDataParallel(loss_mod, find_unused_parameters=True)
             loader = self._loader(self.train_set, shuffle=True)

@@ -76,7 +76,9 @@ def train_side_by_side(
         for part in (models[v].flow, models[v].fusion):
             if part is not None:
                 part.requires_grad_(False)
-    losses = {v: StageLoss(models[v], "refine", v, profiles[v].harm_weight) for v in variants}
+    losses = {
+        v: StageLoss(models[v], "refine", v, profiles[v].refine_harm_weight()) for v in variants
+    }
     history: dict[str, list[dict]] = {v: [] for v in variants}
     position = (0, 0)  # (stage index, next epoch), shared by every variant
     saved: dict[str, dict] = {}
