@@ -113,6 +113,25 @@ pub struct DirectFitParams {
     /// Only fits whose coarsest-level correlation is within this of the best one's are carried
     /// (a clear winner is refined alone, which keeps the usual fit's cost down).
     pub carry_margin: f32,
+    /// The carried fits are refined down to the first level at most this wide (never past
+    /// the finest: [`choice_level`]) and compared there; only those within
+    /// [`choice_margin`](Self::choice_margin) of the best go on through the finer levels. 320:
+    /// a 320×240 frame (the tuning sets, every `RESULTS.md` set) compares them at full
+    /// resolution as [`carried_fits`](Self::carried_fits) was tuned, bit for bit as before;
+    /// a 640×480 frame at the same 320 px width, instead of refining every carried fit at
+    /// 640 px, whose passes were two thirds of a 640×480 fit's pixel work.
+    pub choice_width: usize,
+    /// Fits whose correlation at the choice level is within this of the best one's are all
+    /// refined through the finer levels, where the best is kept. Measured on 640×480 tuning
+    /// sets no table reports (24 frames each: `dear-synth generate --seed 9201` at σ = 4 px,
+    /// `perturb --seed 12`; the held-out family, `--seed 9202`, `perturb --seed 13`; near-empty
+    /// rooms aligned, `--seed 9203`; `dear eval --baselines`, two cores; AEPE of the direct
+    /// fit without the network, px, and its ms per frame): every carried fit refined at 640
+    /// px 3.32 / 5.38 / 0.00 px at 308 / 338 / 182 ms; margin 0 (the best at 320 px alone)
+    /// 3.33 / 5.42 / 0.00 at 212 / 198 / 156 ms, and the chain's final flow on the held-out
+    /// set 5.37 → 5.44 px; 0.01 every AEPE as with all fits refined (3.32 / 5.38 / 0.00, the
+    /// chain's too) at 237 / 278 / 154 ms; 0.03 the same AEPE at 264 / 273 ms.
+    pub choice_margin: f32,
     /// Gaussian blur of both edge maps at every level, in that level's px; the coarser levels
     /// are made from the blurred finer ones. Tuned on rendered views (`dear-synth perturb
     /// --seed 11` of the 40-frame tuning sets of five families, which no table reports; mean
@@ -187,6 +206,8 @@ impl Default for DirectFitParams {
             reference_handicap: 0.03,
             carried_fits: 3,
             carry_margin: 0.05,
+            choice_width: 320,
+            choice_margin: 0.01,
             blur_sigma: 0.4,
             finest_blur_sigma: None,
             depth_edge_weight: 0.0,
@@ -332,12 +353,29 @@ pub fn estimate_calibration_direct_against(
         params.carried_fits.max(1),
         params.carry_margin,
     );
-    let mut best: Option<Candidate> = None;
-    for mut fit in carried {
-        for level in pyramid[finest..coarsest].iter().rev() {
+    let widths: Vec<usize> = pyramid.iter().map(|l| l.tof_w).collect();
+    let choice = choice_level(&widths, finest, params.choice_width);
+    let refine_through = |fit: &mut Candidate, levels: &[Level]| {
+        for level in levels.iter().rev() {
             (fit.theta, fit.correlation) =
                 gauss_newton(level, fit.theta, fit_t, params.iterations, params.robust_k);
         }
+    };
+    let mut fits: Vec<Candidate> = carried
+        .into_iter()
+        .map(|mut fit| {
+            refine_through(&mut fit, &pyramid[choice..coarsest]);
+            fit
+        })
+        .collect();
+    let lead = fits
+        .iter()
+        .map(Candidate::score)
+        .fold(f64::NEG_INFINITY, f64::max);
+    fits.retain(|f| f.score() >= lead - params.choice_margin as f64);
+    let mut best: Option<Candidate> = None;
+    for mut fit in fits {
+        refine_through(&mut fit, &pyramid[finest..choice]);
         if best.is_none_or(|b| fit.score() > b.score()) {
             best = Some(fit);
         }
@@ -1134,6 +1172,16 @@ fn search_offsets(level: &Level, initial: &Theta, params: &DirectFitParams) -> V
     out
 }
 
+/// The level the carried fits are compared at, of a pyramid whose levels are `widths` wide
+/// (finest first, the last the coarsest, where the search ran): the finest level from
+/// `finest` on at most `choice_width` wide, short of the coarsest; `finest` when none is.
+fn choice_level(widths: &[usize], finest: usize, choice_width: usize) -> usize {
+    let coarsest = widths.len().saturating_sub(1);
+    (finest..coarsest)
+        .find(|&l| widths[l] <= choice_width)
+        .unwrap_or(finest)
+}
+
 /// What one pass over a level at some `θ` gives.
 struct Pass {
     /// Correlation sums (unweighted).
@@ -1398,6 +1446,19 @@ mod tests {
         cx: 3.0,
         cy: 1.5,
     };
+
+    /// 320×240 compares the carried fits at full resolution (as tuned), 640×480 at 320 px, a
+    /// frame with no level that narrow short of the coarsest at its finest level.
+    #[test]
+    fn carried_fits_are_compared_at_the_finest_level_at_most_choice_width_wide() {
+        assert_eq!(choice_level(&[320, 160], 0, 320), 0);
+        assert_eq!(choice_level(&[640, 320, 160], 0, 320), 1);
+        assert_eq!(choice_level(&[1280, 640, 320, 160], 0, 320), 2);
+        assert_eq!(choice_level(&[400, 200], 0, 320), 0);
+        assert_eq!(choice_level(&[640, 320, 160], 1, 320), 1);
+        assert_eq!(choice_level(&[640, 320, 160], 0, 640), 0);
+        assert_eq!(choice_level(&[160], 0, 320), 0);
+    }
 
     fn max_flow_error(c: Calibration, truth: Calibration, depths: &[f32]) -> f32 {
         depths
