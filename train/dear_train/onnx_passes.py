@@ -97,13 +97,15 @@ def _replace_reshape_subsampling(model: onnx.ModelProto) -> int:
     ``Slice`` on its generic path (0.5 of the refine graph's ~12 ms at 640x480 for the first
     layer alone, ``graph_profile``), the pool in a quarter of that. Returns how many."""
     graph = model.graph
-    ends = {
-        n.input[0][: -len("/picked")]
-        for n in graph.node
-        if n.op_type == "Reshape" and n.input[0].endswith("/picked")
-    }
+
+    def ended_by(node: onnx.NodeProto) -> str | None:
+        """The block ``p`` whose last node (``Reshape`` of ``{p}/picked``) ``node`` is."""
+        if node.op_type != "Reshape" or not node.input[0].endswith("/picked"):
+            return None
+        return node.input[0].removesuffix("/picked")
+
     produced = {o for n in graph.node for o in n.output}
-    blocks = {p for p in ends if f"{p}/full" in produced}
+    blocks = {p for n in graph.node if (p := ended_by(n)) and f"{p}/full" in produced}
     if not blocks:
         return 0
 
@@ -112,9 +114,7 @@ def _replace_reshape_subsampling(model: onnx.ModelProto) -> int:
 
     nodes: list[onnx.NodeProto] = []
     for node in graph.node:
-        picked = node.input[0] if node.input else ""
-        if node.op_type == "Reshape" and picked.endswith("/picked") and picked[:-7] in blocks:
-            p = picked[: -len("/picked")]
+        if (p := ended_by(node)) in blocks:
             nodes.append(_subsample(f"{p}/full", node.output[0], f"{p}/picked"))
             continue
         p = block_of(node.output[0]) if node.output else None
