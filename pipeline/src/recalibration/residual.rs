@@ -17,9 +17,9 @@
 //!   `t/z + c`; if only `c` moved (`c = ĉ + δ`, what OIS wander and thermal drift of the
 //!   principal point do frame to frame), the amplitude edge that belongs to the RGB edge at `p`
 //!   sits at `p + δ` in `A_w` wherever the depth is locally smooth. So `δ` is a direct, cheap
-//!   measurement of the principal-point correction — no network, ~1 ms — which the online
-//!   estimator uses to track `c` between network frames. `t` (depth-dependent) is left to the
-//!   network.
+//!   measurement of the principal-point correction — no network, under a millisecond — which
+//!   the online estimator uses to track `c` between network frames. `t` (depth-dependent) is
+//!   left to the network.
 
 use ndarray::{ArrayView2, ArrayView3};
 use rayon::prelude::*;
@@ -31,7 +31,8 @@ use crate::vector_math::window3x3;
 pub const MIN_SAMPLES: usize = 64;
 
 /// About this many pixels are sampled whatever the resolution (the grid's stride grows with the
-/// image), so the check costs the same ~1 ms at 320×240 and at 640×480.
+/// image), so the check costs about the same at 320×240 and at 640×480 (0.4 and 0.7 ms on one
+/// core, `stage_profile`).
 const TARGET_SAMPLES: usize = 20_000;
 
 /// The principal-point correction measured from the edges (see the module docs).
@@ -68,7 +69,7 @@ pub struct EdgeCheck {
     amplitude_gradient: Vec<f32>,
     valid: Vec<bool>,
     samples: Vec<u32>,
-    /// `|∇L|` at each sample and its square, in f64 as [`Sums::add`] uses them.
+    /// `|∇L|` at each sample and its square, in f64 as the sums use them.
     sample_luma: Vec<(f64, f64)>,
     ncc: Vec<f32>,
 }
@@ -86,8 +87,9 @@ struct Sums {
 
 impl Sums {
     /// Adds the pair `(a, b)`, with `aa = a · a` computed by the caller (once per sample
-    /// rather than once per shift).
-    #[inline]
+    /// rather than once per shift): one shift at a time, what [`lane_sums`] does for
+    /// [`LANES`] shifts at once (the tests' reference).
+    #[cfg(test)]
     fn add_f64(&mut self, a: f64, aa: f64, b: f64) {
         self.n += 1;
         self.a += a;
@@ -106,6 +108,78 @@ impl Sums {
         let vb = self.bb / n - (self.b / n).powi(2);
         let cov = self.ab / n - self.a * self.b / (n * n);
         (va > 1e-12 && vb > 1e-12).then(|| (cov / (va.sqrt() * vb.sqrt())) as f32)
+    }
+}
+
+/// Shifts along x whose sums one pass over the samples accumulates side by side: a vector
+/// of f64 lanes (AVX-512), so that the pass costs about what one shift's did alone.
+const LANES: usize = 8;
+
+/// The [`Sums`] of [`LANES`] consecutive shifts along x, one lane each.
+#[derive(Debug, Clone, Copy, Default)]
+struct LaneSums {
+    n: [u64; LANES],
+    a: [f64; LANES],
+    b: [f64; LANES],
+    aa: [f64; LANES],
+    bb: [f64; LANES],
+    ab: [f64; LANES],
+}
+
+impl LaneSums {
+    fn lane(&self, l: usize) -> Sums {
+        Sums {
+            n: self.n[l] as usize,
+            a: self.a[l],
+            b: self.b[l],
+            aa: self.aa[l],
+            bb: self.bb[l],
+            ab: self.ab[l],
+        }
+    }
+}
+
+/// The sums of shifts `offset + l` (flat index offsets, `l < LANES`): for every sample `i`
+/// in order, [`Sums::add_f64`] of its luma gradient and `gradient[i + offset + l]` where
+/// `valid[i + offset + l]`. An invalid pixel adds `+0.0` to sums that are `≥ +0.0` (gradient
+/// magnitudes), which leaves them bit for bit as skipping it would; selects, not branches,
+/// so the lanes vectorise. `valid` and `gradient` must reach `LANES − 1` past every
+/// `i + offset` (the check pads them). Compiled for AVX-512 and AVX2 as well, chosen at run
+/// time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
+fn lane_sums(
+    samples: &[u32],
+    sample_luma: &[(f64, f64)],
+    valid: &[bool],
+    gradient: &[f32],
+    offset: isize,
+) -> LaneSums {
+    // Local accumulators (kept in registers) and masks applied to the bits: with `if ok`
+    // selects the compiler split every sum into two masked read-modify-writes in memory.
+    let (mut n, mut sa, mut sb) = ([0u64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
+    let (mut saa, mut sbb, mut sab) = ([0.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
+    let keep = |x: f64, mask: u64| f64::from_bits(x.to_bits() & mask);
+    for (&i, &(a, aa)) in samples.iter().zip(sample_luma) {
+        let j = (i as isize + offset) as usize;
+        let (ok, g) = (&valid[j..j + LANES], &gradient[j..j + LANES]);
+        for l in 0..LANES {
+            let b = f64::from(g[l]);
+            let mask = 0u64.wrapping_sub(u64::from(ok[l]));
+            n[l] += mask & 1;
+            sa[l] += keep(a, mask);
+            sb[l] += keep(b, mask);
+            saa[l] += keep(aa, mask);
+            sbb[l] += keep(b * b, mask);
+            sab[l] += keep(a * b, mask);
+        }
+    }
+    LaneSums {
+        n,
+        a: sa,
+        b: sb,
+        aa: saa,
+        bb: sbb,
+        ab: sab,
     }
 }
 
@@ -165,25 +239,29 @@ impl EdgeCheck {
             (a, a * a)
         }));
 
-        // One shift per task. Each shift's sums run over the samples in order, as
-        // `Sums::add` would, so the result does not depend on the threads.
+        // One task per row of shifts; one pass over the samples accumulates the sums of up
+        // to LANES of its shifts side by side (see `lane_sums`). Each shift's sums still run
+        // over the samples in order, as `Sums::add_f64` adds them, so the result does not depend
+        // on the threads or on the lanes.
         let side = 2 * r + 1;
         self.ncc.clear();
         self.ncc.resize(side * side, f32::NAN);
         let (samples, sample_luma) = (&self.samples, &self.sample_luma);
         let (valid, amplitude_gradient) = (&self.valid, &self.amplitude_gradient);
-        self.ncc.par_iter_mut().enumerate().for_each(|(k, ncc)| {
-            let (dy, dx) = (k / side, k % side);
-            let offset = (dy as isize - r as isize) * w as isize + (dx as isize - r as isize);
-            let mut s = Sums::default();
-            for (&i, &(a, aa)) in samples.iter().zip(sample_luma) {
-                let j = (i as isize + offset) as usize;
-                if valid[j] {
-                    s.add_f64(a, aa, f64::from(amplitude_gradient[j]));
+        self.ncc
+            .par_chunks_mut(side)
+            .enumerate()
+            .for_each(|(dy, row)| {
+                for (chunk, ncc) in row.chunks_mut(LANES).enumerate() {
+                    let dx0 = chunk * LANES;
+                    let offset =
+                        (dy as isize - r as isize) * w as isize + (dx0 as isize - r as isize);
+                    let lanes = lane_sums(samples, sample_luma, valid, amplitude_gradient, offset);
+                    for (l, ncc) in ncc.iter_mut().enumerate() {
+                        *ncc = lanes.lane(l).ncc().unwrap_or(f32::NAN);
+                    }
                 }
-            }
-            *ncc = s.ncc().unwrap_or(f32::NAN);
-        });
+            });
         // The window's centre is the zero shift.
         let zero = self.ncc[r * side + r];
         if !zero.is_finite() {
@@ -242,14 +320,15 @@ impl EdgeCheck {
     ) {
         let (h, w) = warped_depth.dim();
         let n = h * w;
-        for buffer in [
-            &mut self.luma,
-            &mut self.luma_gradient,
-            &mut self.amplitude_gradient,
-        ] {
-            buffer.resize(n, 0.0);
-        }
-        self.valid.resize(n, false);
+        self.luma.resize(n, 0.0);
+        self.luma_gradient.resize(n, 0.0);
+        // The amplitude's gradient and the validity reach LANES past the image, invalid, so
+        // that `lane_sums` reads whole lanes (the pad is reset: a larger frame may have left
+        // values there).
+        self.amplitude_gradient.resize(n + LANES, 0.0);
+        self.amplitude_gradient[n..].fill(0.0);
+        self.valid.resize(n + LANES, false);
+        self.valid[n..].fill(false);
         let rgb = rgb.as_standard_layout();
         let rgb = rgb.as_slice().expect("standard layout is contiguous");
         let amplitude = warped_amplitude.as_standard_layout();
@@ -264,8 +343,8 @@ impl EdgeCheck {
         // Rows in parallel, on flat slices; the border rows and columns stay invalid.
         self.luma_gradient
             .par_chunks_mut(w)
-            .zip(self.amplitude_gradient.par_chunks_mut(w))
-            .zip(self.valid.par_chunks_mut(w))
+            .zip(self.amplitude_gradient[..n].par_chunks_mut(w))
+            .zip(self.valid[..n].par_chunks_mut(w))
             .enumerate()
             .for_each(|(y, ((lg, ag), valid))| {
                 lg.fill(0.0);
@@ -435,5 +514,43 @@ mod tests {
             EdgeCheck::new(2).measure(rgb.view(), amplitude.view(), depth.view()),
             None
         );
+    }
+
+    #[test]
+    fn lanes_give_each_shift_the_sums_of_one_shift_at_a_time_bit_for_bit() {
+        // Holes in the depth (invalid samples at some shifts), radii narrower and wider than
+        // one vector of lanes, and a smaller frame after a larger one.
+        let mut check = EdgeCheck::new(0);
+        for (h, w, radius) in [(70, 90, 5), (48, 64, 1), (60, 80, 3), (40, 50, 6)] {
+            let (rgb, amplitude) = scene(h, w, 1.0, -2.0);
+            let depth = Array2::from_shape_fn((h, w), |(y, x)| {
+                if (x * 7 + y * 3) % 11 == 0 || (x > 20 && x < 26) {
+                    0.0
+                } else {
+                    1.0 + 0.01 * x as f32
+                }
+            });
+            check.search_px = radius;
+            check.measure(rgb.view(), amplitude.view(), depth.view());
+            let side = 2 * radius + 1;
+            assert_eq!(check.ncc.len(), side * side);
+            for (k, &got) in check.ncc.iter().enumerate() {
+                let offset = (k / side) as isize * w as isize + (k % side) as isize
+                    - radius as isize * (w as isize + 1);
+                let mut one = Sums::default();
+                for (&i, &(a, aa)) in check.samples.iter().zip(&check.sample_luma) {
+                    let j = (i as isize + offset) as usize;
+                    if check.valid[j] {
+                        one.add_f64(a, aa, f64::from(check.amplitude_gradient[j]));
+                    }
+                }
+                let want = one.ncc().unwrap_or(f32::NAN);
+                assert_eq!(
+                    got.to_bits(),
+                    want.to_bits(),
+                    "{w}x{h}, radius {radius}, shift {k}"
+                );
+            }
+        }
     }
 }
