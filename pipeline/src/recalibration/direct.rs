@@ -412,7 +412,7 @@ pub fn estimate_calibration_direct_against(
 // Small dense linear algebra reads best with indices.
 #[allow(clippy::needless_range_loop)]
 fn information_at(level: &Level, theta: &Theta, fit_t: bool) -> Information {
-    let pass = normal_equations(level, theta, 0.0);
+    let pass = normal_equations(level, theta, 0.0, PassKind::NormalEquations);
     let h = pass.hm;
     // Schur complement of the photometric (α, β) block.
     let (a, b, d) = (h[4][4], h[4][5], h[5][5]);
@@ -1196,15 +1196,28 @@ struct Pass {
     sse: f64,
 }
 
-/// One pass at `theta`: the correlation and the Gauss–Newton normal equations of
-/// `Σ ρ(α·I(p(q)) + β − T(q))`, with `ρ` the Cauchy loss of scale `k` (least squares if
-/// `k ≤ 0`).
+/// What a pass computes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum PassKind {
+    /// The correlation sums, the costs and the residuals' squares.
+    Residuals,
+    /// These and the normal equations (`hm`, `g`; zero otherwise).
+    NormalEquations,
+}
+
+/// One pass at `theta`: the correlation and (with [`PassKind::NormalEquations`]) the
+/// Gauss–Newton normal equations of `Σ ρ(α·I(p(q)) + β − T(q))`, with `ρ` the Cauchy loss of
+/// scale `k` (least squares if `k ≤ 0`). A `Residuals` pass computes every other sum with the
+/// same operations in the same order, so they are those of the full pass bit for bit, at
+/// about half its cost: the passes whose normal equations are never solved (the start's gain
+/// and robust scale, every step tried before it is accepted) run it.
 // Small dense linear algebra reads best with indices.
 #[allow(clippy::needless_range_loop)]
 // Compiled for wider register files too: the 27 running sums of a pixel spill on the baseline
 // x86-64 target's 16 registers (no FMA contraction happens, so every version gives the same bits).
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
-fn normal_equations(level: &Level, theta: &Theta, k_robust: f32) -> Pass {
+fn normal_equations(level: &Level, theta: &Theta, k_robust: f32, kind: PassKind) -> Pass {
+    let jacobian = kind == PassKind::NormalEquations;
     let mut corr = Corr::default();
     let mut hm = [[0.0f64; 6]; 6];
     let mut g = [0.0f64; 6];
@@ -1242,6 +1255,9 @@ fn normal_equations(level: &Level, theta: &Theta, k_robust: f32) -> Pass {
                 cost_r += 0.5 * r2;
                 1.0
             };
+            if !jacobian {
+                continue;
+            }
             // p = q − (t·a + c)/s: ∂p/∂t = −a/s, ∂p/∂c = −1/s.
             let gx = -alpha * ix * inv_s;
             let gy = -alpha * iy * inv_s;
@@ -1382,23 +1398,23 @@ fn gauss_newton(
     };
     let mut theta = start;
     // Photometric gain/offset of the start point.
-    let p0 = normal_equations(level, &theta, 0.0);
+    let p0 = normal_equations(level, &theta, 0.0, PassKind::Residuals);
     let (alpha, beta) = p0.corr.gain_offset();
     theta.p[4] = alpha;
     theta.p[5] = beta;
     let k = if robust_k > 0.0 {
-        let p = normal_equations(level, &theta, 0.0);
+        let p = normal_equations(level, &theta, 0.0, PassKind::Residuals);
         robust_k * (p.sse / p.corr.n.max(1.0)).sqrt() as f32
     } else {
         0.0
     };
-    let mut pass = normal_equations(level, &theta, k);
+    let mut pass = normal_equations(level, &theta, k, PassKind::NormalEquations);
     let Some(mut corr) = pass.corr.value() else {
         return (theta, f64::NEG_INFINITY);
     };
     // Pixels leave the image as the flow changes: compare mean costs.
     let mean_cost = |p: &Pass| p.cost / p.corr.n.max(1.0);
-    for _ in 0..iterations {
+    for iteration in 0..iterations {
         let Some(mut delta) = solve(&pass.hm, &pass.g, idx) else {
             break;
         };
@@ -1415,10 +1431,20 @@ fn gauss_newton(
             for i in 0..6 {
                 cand.p[i] += delta[i];
             }
-            let next = normal_equations(level, &cand, k);
+            // A step is judged on its cost alone (most are rejected: a level usually ends
+            // with four halvings that all fail); the normal equations at an accepted step are
+            // computed only if they will be solved, i.e. unless the step ends the level (too
+            // small, or the last).
+            let next = normal_equations(level, &cand, k, PassKind::Residuals);
             if let Some(c) = next.corr.value() {
                 if mean_cost(&next) <= mean_cost(&pass) {
-                    (theta, corr, pass) = (cand, c, next);
+                    let ends_level = change < 0.01 || iteration + 1 == iterations;
+                    pass = if ends_level {
+                        next
+                    } else {
+                        normal_equations(level, &cand, k, PassKind::NormalEquations)
+                    };
+                    (theta, corr) = (cand, c);
                     accepted = true;
                     break;
                 }
@@ -1660,6 +1686,47 @@ mod tests {
         );
         assert!(fit.fell_back, "{fit:?}");
         assert_eq!(fit.calibration, reference);
+    }
+
+    /// A pass that only judges a step gives the sums of the full pass bit for bit (the fit's
+    /// path, and so its result, does not depend on which passes skip the normal equations).
+    #[test]
+    fn a_residuals_pass_gives_the_full_pass_sums_bit_for_bit() {
+        let (rgb, amplitude, depth) = textured_scene(&TRUTH);
+        let levels = build_pyramid(
+            rgb.view(),
+            amplitude.view(),
+            depth.view(),
+            &DirectFitParams::default(),
+        );
+        let mut theta = Theta::from(Calibration {
+            tx: 4.5,
+            cx: 2.0,
+            ..TRUTH
+        });
+        (theta.p[4], theta.p[5]) = (0.8, 0.05);
+        let bits = |p: &Pass| {
+            let c = p.corr;
+            [
+                c.n, c.st, c.stt, c.si, c.sii, c.sii_map, c.sti, p.cost, p.sse,
+            ]
+            .map(f64::to_bits)
+        };
+        for level in &levels {
+            for k in [0.0, 0.05] {
+                let full = normal_equations(level, &theta, k, PassKind::NormalEquations);
+                let residuals = normal_equations(level, &theta, k, PassKind::Residuals);
+                assert!(full.corr.n > 100.0 && full.hm[0][0] > 0.0);
+                assert_eq!(
+                    bits(&residuals),
+                    bits(&full),
+                    "level {}, k {k}",
+                    level.tof_w
+                );
+                assert_eq!(residuals.hm, [[0.0; 6]; 6]);
+                assert_eq!(residuals.g, [0.0; 6]);
+            }
+        }
     }
 
     /// Fits carried from the coarsest level: best first, one per basin, none beyond the
