@@ -790,8 +790,10 @@ struct Corr {
 }
 
 impl Corr {
-    /// A sample `i` taken at a pixel (no interpolation).
-    #[inline]
+    /// A sample `i` taken at a pixel (no interpolation): what the offset search adds per
+    /// point and offset, [`offset_lane_sums`] for several offsets at once (the tests'
+    /// reference).
+    #[cfg(test)]
     fn add(&mut self, t: f64, i: f64) {
         self.add_sampled(t, i, i * i);
     }
@@ -967,6 +969,81 @@ fn parabola(m: f64, c: f64, p: f64) -> f64 {
     }
 }
 
+/// A valid ToF pixel of [`search_offsets`]: the whole-pixel part of its landing point (at the
+/// centre of the search), the bilinear weights (the same for every whole-pixel shift), T and
+/// its depth layer.
+struct SearchPoint {
+    x0: i32,
+    y0: i32,
+    w: [f32; 4],
+    t: f32,
+    layer: u8,
+}
+
+/// Offsets along x whose sums [`offset_lane_sums`] accumulates side by side.
+const SEARCH_LANES: usize = 8;
+
+/// The sums of [`Corr`] that depend on the offset, one lane per offset.
+struct LaneCorr {
+    si: [f64; SEARCH_LANES],
+    sii: [f64; SEARCH_LANES],
+    sti: [f64; SEARCH_LANES],
+}
+
+/// For the offsets `(dx, dy)`, `dx = dx_lo + SEARCH_LANES − 1 − l` in lane `l`: over `points`
+/// in order, the sample `v` of `plane` (`w × h`) at each point's landing moved by `−(dx, dy)`
+/// (bilinear, 0 where its 2×2 cell is not inside) added as [`Corr::add`] adds it. In lane
+/// order the cells of a point are consecutive pixels, so where all are inside (nearly every
+/// point) the samples are contiguous loads. Compiled for AVX-512 and AVX2 as well, chosen at
+/// run time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
+fn offset_lane_sums(
+    points: &[SearchPoint],
+    plane: &[f32],
+    (w, h): (i32, i32),
+    dy: i32,
+    dx_lo: i32,
+) -> LaneCorr {
+    const L: usize = SEARCH_LANES;
+    let wi = w as usize;
+    let (mut si, mut sii, mut sti) = ([0.0f64; L], [0.0f64; L], [0.0f64; L]);
+    let mut v = [0.0f32; L];
+    for p in points {
+        // Lane 0's cell; lane l's is l pixels to the right.
+        let (xb, y0) = (p.x0 - dx_lo - (L as i32 - 1), p.y0 - dy);
+        if xb >= 0 && y0 >= 0 && xb + (L as i32) < w && y0 + 1 < h {
+            let i = (y0 * w + xb) as usize;
+            let (r0, r1) = (&plane[i..i + L + 1], &plane[i + wi..i + wi + L + 1]);
+            for l in 0..L {
+                v[l] = p.w[0] * r0[l] + p.w[1] * r0[l + 1] + p.w[2] * r1[l] + p.w[3] * r1[l + 1];
+            }
+        } else {
+            for (l, v) in v.iter_mut().enumerate() {
+                let x0 = xb + l as i32;
+                *v = if x0 < 0 || y0 < 0 || x0 + 1 >= w || y0 + 1 >= h {
+                    // Zero padding: the pixel set stays fixed (a small overlap must not win
+                    // by chance).
+                    0.0
+                } else {
+                    let i = (y0 * w + x0) as usize;
+                    p.w[0] * plane[i]
+                        + p.w[1] * plane[i + 1]
+                        + p.w[2] * plane[i + wi]
+                        + p.w[3] * plane[i + wi + 1]
+                };
+            }
+        }
+        let t = p.t as f64;
+        for l in 0..L {
+            let i = v[l] as f64;
+            si[l] += i;
+            sii[l] += i * i;
+            sti[l] += t * i;
+        }
+    }
+    LaneCorr { si, sii, sti }
+}
+
 /// Exhaustive search of a whole-pixel offset of `c` around `initial` (t held) at `level`,
 /// scored over all pixels and, in the same pass, separately over layers of inverse depth.
 /// Returns the starting points for Gauss–Newton: the best local maxima of the global score,
@@ -978,15 +1055,6 @@ fn search_offsets(level: &Level, initial: &Theta, params: &DirectFitParams) -> V
     let r = (params.search_radius_px / level.scale).round().max(0.0) as i32;
     let side = (2 * r + 1) as usize;
     let (w, h) = (level.rgb_w as i32, level.rgb_h as i32);
-    // Per valid ToF pixel: the whole-pixel part of its landing point (at the centre of the
-    // search), the bilinear weights (the same for every whole-pixel shift), T and its layer.
-    struct Point {
-        x0: i32,
-        y0: i32,
-        w: [f32; 4],
-        t: f32,
-        layer: u8,
-    }
     // Layer bounds: quantiles of the inverse depth over the edge pixels.
     let mut edge_a: Vec<f32> = level
         .t
@@ -1018,7 +1086,7 @@ fn search_offsets(level: &Level, initial: &Theta, params: &DirectFitParams) -> V
             }
             let (fx0, fy0) = (px.floor(), py.floor());
             let (fx, fy) = (px - fx0, py - fy0);
-            points.push(Point {
+            points.push(SearchPoint {
                 x0: fx0 as i32,
                 y0: fy0 as i32,
                 w: [
@@ -1034,37 +1102,58 @@ fn search_offsets(level: &Level, initial: &Theta, params: &DirectFitParams) -> V
     }
     let mut scores = vec![f64::NEG_INFINITY; side * side];
     let mut layer_scores = vec![f64::NEG_INFINITY; layers * side * side];
-    let wi = w as usize;
-    let mut sums = vec![Corr::default(); layers];
+    // Each layer's points together, each layer in row-major order (a stable sort), which is
+    // the order its sums always ran in; and the sums no offset changes (the count and T's),
+    // once per layer. Every offset's sums are then those of one scan over the points (bit
+    // for bit), but `offset_lane_sums` runs SEARCH_LANES offsets per pass over a layer with
+    // its sums in registers: one offset at a time into a layer picked per point was most of
+    // the search's cost.
+    points.sort_by_key(|p| p.layer);
+    let mut fixed = vec![Corr::default(); layers];
+    for p in &points {
+        let (c, t) = (&mut fixed[p.layer as usize], p.t as f64);
+        c.n += 1.0;
+        c.st += t;
+        c.stt += t * t;
+    }
+    let layer_points: Vec<&[SearchPoint]> = (0..layers)
+        .map(|k| {
+            let lo = points.partition_point(|p| (p.layer as usize) < k);
+            let hi = points.partition_point(|p| (p.layer as usize) <= k);
+            &points[lo..hi]
+        })
+        .collect();
+    let plane: Vec<f32> = level.rgb.iter().map(|v| v[0]).collect();
     for dy in -r..=r {
-        for dx in -r..=r {
-            sums.iter_mut().for_each(|c| *c = Corr::default());
-            for p in &points {
-                // The offset moves the landing point by −d.
-                let (x0, y0) = (p.x0 - dx, p.y0 - dy);
-                let v = if x0 < 0 || y0 < 0 || x0 + 1 >= w || y0 + 1 >= h {
-                    // Zero padding: the pixel set stays fixed (a small overlap must not win
-                    // by chance).
-                    0.0
-                } else {
-                    let i = (y0 * w + x0) as usize;
-                    p.w[0] * level.rgb[i][0]
-                        + p.w[1] * level.rgb[i + 1][0]
-                        + p.w[2] * level.rgb[i + wi][0]
-                        + p.w[3] * level.rgb[i + wi + 1][0]
-                };
-                sums[p.layer as usize].add(p.t as f64, v as f64);
-            }
-            let cell = ((dy + r) as usize) * side + (dx + r) as usize;
-            let mut all = Corr::default();
-            for (k, c) in sums.iter().enumerate() {
-                all.merge(c);
-                if let Some(v) = c.value() {
-                    layer_scores[k * side * side + cell] = v;
+        for dx_lo in (-r..=r).step_by(SEARCH_LANES) {
+            let sums: Vec<LaneCorr> = layer_points
+                .iter()
+                .map(|points| offset_lane_sums(points, &plane, (w, h), dy, dx_lo))
+                .collect();
+            // Lane `l` is the offset `dx_lo + SEARCH_LANES − 1 − l`.
+            for l in 0..SEARCH_LANES {
+                let dx = dx_lo + (SEARCH_LANES - 1 - l) as i32;
+                if dx > r {
+                    continue;
                 }
-            }
-            if let Some(v) = all.value() {
-                scores[cell] = v;
+                let cell = ((dy + r) as usize) * side + (dx + r) as usize;
+                let mut all = Corr::default();
+                for (k, (lanes, fixed)) in sums.iter().zip(&fixed).enumerate() {
+                    let c = Corr {
+                        si: lanes.si[l],
+                        sii: lanes.sii[l],
+                        sii_map: lanes.sii[l],
+                        sti: lanes.sti[l],
+                        ..*fixed
+                    };
+                    all.merge(&c);
+                    if let Some(v) = c.value() {
+                        layer_scores[k * side * side + cell] = v;
+                    }
+                }
+                if let Some(v) = all.value() {
+                    scores[cell] = v;
+                }
             }
         }
     }
@@ -1686,6 +1775,60 @@ mod tests {
         );
         assert!(fit.fell_back, "{fit:?}");
         assert_eq!(fit.calibration, reference);
+    }
+
+    /// The offset search's lanes give every offset the sums of one scan over the points,
+    /// `Corr::add` per point, bit for bit: inside the image, across its borders (zero
+    /// padding), and in lanes past the last offset.
+    #[test]
+    fn offset_lanes_give_each_offset_the_sums_of_one_scan_bit_for_bit() {
+        let (w, h) = (37, 23);
+        let plane: Vec<f32> = (0..w * h)
+            .map(|i| ((i * 7919) % 101) as f32 / 100.0)
+            .collect();
+        // Points all over the image, the borders included, in no particular order.
+        let points: Vec<SearchPoint> = (0..300)
+            .map(|k| {
+                let f = (k * 37 % 97) as f32 / 97.0;
+                SearchPoint {
+                    x0: (k * 13 % (w + 6)) as i32 - 3,
+                    y0: (k * 7 % (h + 4)) as i32 - 2,
+                    w: [(1.0 - f) * 0.7, f * 0.7, (1.0 - f) * 0.3, f * 0.3],
+                    t: (k % 17) as f32 / 16.0,
+                    layer: 0,
+                }
+            })
+            .collect();
+        for dy in [-3, 0, 2] {
+            for dx_lo in [-9, -1, 4] {
+                let lanes = offset_lane_sums(&points, &plane, (w as i32, h as i32), dy, dx_lo);
+                for l in 0..SEARCH_LANES {
+                    let dx = dx_lo + (SEARCH_LANES - 1 - l) as i32;
+                    let mut one = Corr::default();
+                    for p in &points {
+                        let (x0, y0) = (p.x0 - dx, p.y0 - dy);
+                        let inside = x0 >= 0 && y0 >= 0 && x0 + 1 < w as i32 && y0 + 1 < h as i32;
+                        let v = if inside {
+                            let i = (y0 * w as i32 + x0) as usize;
+                            p.w[0] * plane[i]
+                                + p.w[1] * plane[i + 1]
+                                + p.w[2] * plane[i + w]
+                                + p.w[3] * plane[i + w + 1]
+                        } else {
+                            0.0
+                        };
+                        one.add(p.t as f64, v as f64);
+                    }
+                    let got = [lanes.si[l], lanes.sii[l], lanes.sii[l], lanes.sti[l]];
+                    let want = [one.si, one.sii, one.sii_map, one.sti];
+                    assert_eq!(
+                        got.map(f64::to_bits),
+                        want.map(f64::to_bits),
+                        "({dx}, {dy})"
+                    );
+                }
+            }
+        }
     }
 
     /// A pass that only judges a step gives the sums of the full pass bit for bit (the fit's
