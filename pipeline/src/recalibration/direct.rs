@@ -259,6 +259,30 @@ struct Level {
     rgb_w: usize,
     rgb_h: usize,
     rgb: Vec<[f32; 4]>,
+    /// The correlation sums no calibration changes (`n`, `Σt`, `Σt²` over the valid ToF
+    /// pixels, the rest 0), summed once in the order every pass would (see
+    /// [`Level::with_fixed_sums`]).
+    fixed: Corr,
+}
+
+impl Level {
+    /// The level with its [`fixed`](Self::fixed) sums: every valid ToF pixel (inverse depth
+    /// above 0) counts in every pass, sampled inside the RGB view or not, so these sums are
+    /// the same in every pass over the level; summed here in row-major order, as the passes
+    /// summed them, they are those sums bit for bit.
+    fn with_fixed_sums(mut self) -> Self {
+        let mut fixed = Corr::default();
+        for (&a, &t) in self.inv_depth.iter().zip(&self.t) {
+            if a > 0.0 {
+                let t = t as f64;
+                fixed.n += 1.0;
+                fixed.st += t;
+                fixed.stt += t * t;
+            }
+        }
+        self.fixed = fixed;
+        self
+    }
 }
 
 /// Fits the calibration directly to the edges of one frame; see the module docs.
@@ -532,16 +556,20 @@ fn build_pyramid(
             ),
             _ => (t_blur.clone(), i_blur.clone()),
         };
-        levels.push(Level {
-            scale,
-            tof_w: tw_l,
-            tof_h: th_l,
-            t: t_level,
-            inv_depth: nearest_surface(&a_img, tw_l, th_l, params.contour_radius),
-            rgb_w: rw_l,
-            rgb_h: rh_l,
-            rgb: with_gradient(&i_level, rw_l, rh_l),
-        });
+        levels.push(
+            Level {
+                scale,
+                tof_w: tw_l,
+                tof_h: th_l,
+                t: t_level,
+                inv_depth: nearest_surface(&a_img, tw_l, th_l, params.contour_radius),
+                rgb_w: rw_l,
+                rgb_h: rh_l,
+                rgb: with_gradient(&i_level, rw_l, rh_l),
+                fixed: Corr::default(),
+            }
+            .with_fixed_sums(),
+        );
         if tw_l <= 2 * params.coarse_width.max(8) || th_l < 16 || rh_l < 16 || rw_l < 16 {
             break;
         }
@@ -799,12 +827,24 @@ impl Corr {
     }
 
     /// A sample `i` interpolated between pixels, with `i_sq` the squared map interpolated with
-    /// the same weights.
-    #[inline]
+    /// the same weights: every sum. The passes over a level add only the sums that depend on
+    /// the sample ([`add_varying`](Self::add_varying)) and take the rest from
+    /// [`Level::fixed`]; this is the tests' reference for both.
+    #[cfg(test)]
     fn add_sampled(&mut self, t: f64, i: f64, i_sq: f64) {
         self.n += 1.0;
         self.st += t;
         self.stt += t * t;
+        self.si += i;
+        self.sii += i * i;
+        self.sii_map += i_sq;
+        self.sti += t * i;
+    }
+
+    /// The part of [`add_sampled`](Self::add_sampled) that depends on the sample: a pass
+    /// over a level takes `n`, `Σt` and `Σt²` from [`Level::fixed`].
+    #[inline]
+    fn add_varying(&mut self, t: f64, i: f64, i_sq: f64) {
         self.si += i;
         self.sii += i * i;
         self.sii_map += i_sq;
@@ -852,9 +892,10 @@ fn correlation_at(level: &Level, theta: &Theta) -> Option<f64> {
             }
             let (px, py) = landing(level, theta, x, y, a);
             let s = sample(level, px, py).unwrap_or([0.0; 4]);
-            c.add_sampled(level.t[i] as f64, s[0] as f64, s[3] as f64);
+            c.add_varying(level.t[i] as f64, s[0] as f64, s[3] as f64);
         }
     }
+    (c.n, c.st, c.stt) = (level.fixed.n, level.fixed.st, level.fixed.stt);
     c.value()
 }
 
@@ -1332,7 +1373,7 @@ fn normal_equations(level: &Level, theta: &Theta, k_robust: f32, kind: PassKind)
             let (px, py) = landing(level, theta, x, y, a);
             let [iv, ix, iy, iv_sq] = sample(level, px, py).unwrap_or([0.0; 4]);
             let t = level.t[i];
-            corr.add_sampled(t as f64, iv as f64, iv_sq as f64);
+            corr.add_varying(t as f64, iv as f64, iv_sq as f64);
             let r = alpha * iv + beta - t;
             let r2 = r * r;
             sse_r += r2;
@@ -1376,6 +1417,7 @@ fn normal_equations(level: &Level, theta: &Theta, k_robust: f32, kind: PassKind)
             hm[k][l] = hm[l][k];
         }
     }
+    (corr.n, corr.st, corr.stt) = (level.fixed.n, level.fixed.st, level.fixed.stt);
     Pass {
         corr,
         hm,
@@ -1616,6 +1658,7 @@ mod tests {
             rgb_w: w,
             rgb_h: h,
             rgb: vec![[0.0; 4]; w * h],
+            fixed: Corr::default(),
         };
         let (px, py) = landing(&level, &Theta::from(truth), 30, 20, 1.0 / 1.5);
         assert!((px - 23.0).abs() < 1e-5 && (py - (20.0 - 1.0 / 6.0)).abs() < 1e-5);
@@ -1832,7 +1875,8 @@ mod tests {
     }
 
     /// A pass that only judges a step gives the sums of the full pass bit for bit (the fit's
-    /// path, and so its result, does not depend on which passes skip the normal equations).
+    /// path, and so its result, does not depend on which passes skip the normal equations),
+    /// and both give the correlation sums of one scan adding every sum per pixel.
     #[test]
     fn a_residuals_pass_gives_the_full_pass_sums_bit_for_bit() {
         let (rgb, amplitude, depth) = textured_scene(&TRUTH);
@@ -1868,6 +1912,25 @@ mod tests {
                 );
                 assert_eq!(residuals.hm, [[0.0; 6]; 6]);
                 assert_eq!(residuals.g, [0.0; 6]);
+                // The level's fixed sums and the pass's varying ones are those of one scan
+                // adding every sum per pixel.
+                let mut one = Corr::default();
+                for y in 0..level.tof_h {
+                    for x in 0..level.tof_w {
+                        let i = y * level.tof_w + x;
+                        let a = level.inv_depth[i];
+                        if a > 0.0 {
+                            let (px, py) = landing(level, &theta, x, y, a);
+                            let s = sample(level, px, py).unwrap_or([0.0; 4]);
+                            one.add_sampled(level.t[i] as f64, s[0] as f64, s[3] as f64);
+                        }
+                    }
+                }
+                let scan = Pass {
+                    corr: one,
+                    ..residuals
+                };
+                assert_eq!(bits(&scan), bits(&residuals), "level {}", level.tof_w);
             }
         }
     }
@@ -1885,6 +1948,7 @@ mod tests {
             rgb_w: 4,
             rgb_h: 4,
             rgb: vec![[0.0; 4]; 16],
+            fixed: Corr::default(),
         };
         let at = |cx: f32, corr: f64| {
             let c = Calibration {
