@@ -436,7 +436,13 @@ pub fn estimate_calibration_direct_against(
 // Small dense linear algebra reads best with indices.
 #[allow(clippy::needless_range_loop)]
 fn information_at(level: &Level, theta: &Theta, fit_t: bool) -> Information {
-    let pass = normal_equations(level, theta, 0.0, PassKind::NormalEquations);
+    let pass = normal_equations(
+        level,
+        theta,
+        0.0,
+        PassKind::NormalEquations,
+        Samples::Compute,
+    );
     let h = pass.hm;
     // Schur complement of the photometric (α, β) block.
     let (a, b, d) = (h[4][4], h[4][5], h[5][5]);
@@ -1326,6 +1332,17 @@ struct Pass {
     sse: f64,
 }
 
+/// Where a pass gets each valid ToF pixel's sample of the RGB maps at its landing point.
+enum Samples<'a> {
+    /// Computed.
+    Compute,
+    /// Computed and kept (in the order of the valid pixels) for passes at the same `t` and
+    /// `c`.
+    Store(&'a mut Vec<[f32; 4]>),
+    /// Kept by an earlier pass at the same `t` and `c` (bit for bit what it would compute).
+    Stored(&'a [[f32; 4]]),
+}
+
 /// What a pass computes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum PassKind {
@@ -1346,8 +1363,15 @@ enum PassKind {
 // Compiled for wider register files too: the 27 running sums of a pixel spill on the baseline
 // x86-64 target's 16 registers (no FMA contraction happens, so every version gives the same bits).
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
-fn normal_equations(level: &Level, theta: &Theta, k_robust: f32, kind: PassKind) -> Pass {
+fn normal_equations(
+    level: &Level,
+    theta: &Theta,
+    k_robust: f32,
+    kind: PassKind,
+    mut samples: Samples<'_>,
+) -> Pass {
     let jacobian = kind == PassKind::NormalEquations;
+    let mut valid = 0;
     let mut corr = Corr::default();
     let mut hm = [[0.0f64; 6]; 6];
     let mut g = [0.0f64; 6];
@@ -1370,8 +1394,18 @@ fn normal_equations(level: &Level, theta: &Theta, k_robust: f32, kind: PassKind)
             if a <= 0.0 {
                 continue;
             }
-            let (px, py) = landing(level, theta, x, y, a);
-            let [iv, ix, iy, iv_sq] = sample(level, px, py).unwrap_or([0.0; 4]);
+            let [iv, ix, iy, iv_sq] = match &mut samples {
+                Samples::Stored(stored) => stored[valid],
+                _ => {
+                    let (px, py) = landing(level, theta, x, y, a);
+                    let s = sample(level, px, py).unwrap_or([0.0; 4]);
+                    if let Samples::Store(store) = &mut samples {
+                        store.push(s);
+                    }
+                    s
+                }
+            };
+            valid += 1;
             let t = level.t[i];
             corr.add_varying(t as f64, iv as f64, iv_sq as f64);
             let r = alpha * iv + beta - t;
@@ -1529,17 +1563,39 @@ fn gauss_newton(
     };
     let mut theta = start;
     // Photometric gain/offset of the start point.
-    let p0 = normal_equations(level, &theta, 0.0, PassKind::Residuals);
+    // The start's three passes differ only in gain, offset and robust scale, and a step's
+    // normal equations are computed where its cost was: the samples (the landing and the
+    // bilinear sample, much of a pass) are computed once for each `t` and `c`.
+    let mut stored = Vec::new();
+    let p0 = normal_equations(
+        level,
+        &theta,
+        0.0,
+        PassKind::Residuals,
+        Samples::Store(&mut stored),
+    );
     let (alpha, beta) = p0.corr.gain_offset();
     theta.p[4] = alpha;
     theta.p[5] = beta;
     let k = if robust_k > 0.0 {
-        let p = normal_equations(level, &theta, 0.0, PassKind::Residuals);
+        let p = normal_equations(
+            level,
+            &theta,
+            0.0,
+            PassKind::Residuals,
+            Samples::Stored(&stored),
+        );
         robust_k * (p.sse / p.corr.n.max(1.0)).sqrt() as f32
     } else {
         0.0
     };
-    let mut pass = normal_equations(level, &theta, k, PassKind::NormalEquations);
+    let mut pass = normal_equations(
+        level,
+        &theta,
+        k,
+        PassKind::NormalEquations,
+        Samples::Stored(&stored),
+    );
     let Some(mut corr) = pass.corr.value() else {
         return (theta, f64::NEG_INFINITY);
     };
@@ -1566,14 +1622,27 @@ fn gauss_newton(
             // with four halvings that all fail); the normal equations at an accepted step are
             // computed only if they will be solved, i.e. unless the step ends the level (too
             // small, or the last).
-            let next = normal_equations(level, &cand, k, PassKind::Residuals);
+            stored.clear();
+            let next = normal_equations(
+                level,
+                &cand,
+                k,
+                PassKind::Residuals,
+                Samples::Store(&mut stored),
+            );
             if let Some(c) = next.corr.value() {
                 if mean_cost(&next) <= mean_cost(&pass) {
                     let ends_level = change < 0.01 || iteration + 1 == iterations;
                     pass = if ends_level {
                         next
                     } else {
-                        normal_equations(level, &cand, k, PassKind::NormalEquations)
+                        normal_equations(
+                            level,
+                            &cand,
+                            k,
+                            PassKind::NormalEquations,
+                            Samples::Stored(&stored),
+                        )
                     };
                     (theta, corr) = (cand, c);
                     accepted = true;
@@ -1901,8 +1970,35 @@ mod tests {
         };
         for level in &levels {
             for k in [0.0, 0.05] {
-                let full = normal_equations(level, &theta, k, PassKind::NormalEquations);
-                let residuals = normal_equations(level, &theta, k, PassKind::Residuals);
+                let full = normal_equations(
+                    level,
+                    &theta,
+                    k,
+                    PassKind::NormalEquations,
+                    Samples::Compute,
+                );
+                let mut stored = Vec::new();
+                let residuals = normal_equations(
+                    level,
+                    &theta,
+                    k,
+                    PassKind::Residuals,
+                    Samples::Store(&mut stored),
+                );
+                // Passes reading the samples an earlier one kept: the same sums.
+                let again = normal_equations(
+                    level,
+                    &theta,
+                    k,
+                    PassKind::NormalEquations,
+                    Samples::Stored(&stored),
+                );
+                assert_eq!(bits(&again), bits(&full));
+                assert_eq!(
+                    again.hm.map(|r| r.map(f64::to_bits)),
+                    full.hm.map(|r| r.map(f64::to_bits))
+                );
+                assert_eq!(again.g.map(f64::to_bits), full.g.map(f64::to_bits));
                 assert!(full.corr.n > 100.0 && full.hm[0][0] > 0.0);
                 assert_eq!(
                     bits(&residuals),
