@@ -53,6 +53,16 @@
 //! - **Fallback.** If the final correlation is low, or not better than the initial
 //!   calibration's, the initial (factory) calibration is returned and flagged.
 //!
+//! **Cost.** A fit is a few hundred passes over its levels, most at the coarsest and most only
+//! judging a step that is then rejected. So a pass that judges a step skips the normal
+//! equations (`PassKind::Residuals`), the samples at the landing points are computed once per
+//! calibration tried (`Samples`), the sums no calibration changes once per level
+//! (`Level::fixed`), and the offset search runs eight offsets per pass over the points
+//! (`offset_lane_sums`); every one of these gives the sums of the plain scan bit for bit (their
+//! tests), so the fit's path and result do not depend on them. About 250 ms of one core for
+//! the whole 640×480 measurement with the rough-flow network, 60 ms for a 320×240 fit
+//! (docs/performance.md).
+//!
 //! The blurs are tuned on simulated sets whose RGB views are rendered from the RGB camera
 //! (`dear-synth perturb`), as a camera sees them: see [`DirectFitParams::blur_sigma`]. Sets
 //! that splatted the aligned RGB instead left disocclusions black, a band beside every
