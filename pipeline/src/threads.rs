@@ -125,7 +125,7 @@ fn thread_count(cpus: usize) -> Result<usize, PinThreadsError> {
     }
 }
 
-/// A pool of `threads` threads (`None`: [`thread_count`]'s), thread `i` pinned to the `i`-th
+/// A pool of `threads` threads (`None`: `thread_count`'s), thread `i` pinned to the `i`-th
 /// allowed CPU, and those CPUs. The pins are made as the threads start and checked by
 /// [`check_pins`].
 ///

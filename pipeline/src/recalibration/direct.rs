@@ -124,7 +124,7 @@ pub struct DirectFitParams {
     /// (a clear winner is refined alone, which keeps the usual fit's cost down).
     pub carry_margin: f32,
     /// The carried fits are refined down to the first level at most this wide (never past
-    /// the finest: [`choice_level`]) and compared there; only those within
+    /// the finest: `choice_level`) and compared there; only those within
     /// [`choice_margin`](Self::choice_margin) of the best go on through the finer levels. 320:
     /// a 320×240 frame (the tuning sets, every `RESULTS.md` set) compares them at full
     /// resolution as [`carried_fits`](Self::carried_fits) was tuned, bit for bit as before;
