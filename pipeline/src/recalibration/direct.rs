@@ -284,10 +284,7 @@ impl Level {
         let mut fixed = Corr::default();
         for (&a, &t) in self.inv_depth.iter().zip(&self.t) {
             if a > 0.0 {
-                let t = t as f64;
-                fixed.n += 1.0;
-                fixed.st += t;
-                fixed.stt += t * t;
+                fixed.add_fixed(t as f64);
             }
         }
         self.fixed = fixed;
@@ -350,7 +347,18 @@ pub fn estimate_calibration_direct_against(
     let initial_theta = Theta::from(start);
     let fine = &pyramid[finest];
     let reference_theta = Theta::from(reference);
-    let initial_correlation = correlation_at(fine, &reference_theta).unwrap_or(0.0);
+    // The reference's correlation: a pass that only judges (its corr does not depend on the
+    // gain, offset or robust scale).
+    let initial_correlation = normal_equations(
+        fine,
+        &reference_theta,
+        0.0,
+        PassKind::Residuals,
+        Samples::Compute,
+    )
+    .corr
+    .value()
+    .unwrap_or(0.0);
 
     // Is t observable? Edge-weighted spread of the inverse depth at the finest level.
     let fit_t = rel_inv_depth_spread(fine) >= params.min_rel_inv_depth_spread as f64;
@@ -844,17 +852,22 @@ impl Corr {
 
     /// A sample `i` interpolated between pixels, with `i_sq` the squared map interpolated with
     /// the same weights: every sum. The passes over a level add only the sums that depend on
-    /// the sample ([`add_varying`](Self::add_varying)) and take the rest from
-    /// [`Level::fixed`]; this is the tests' reference for both.
+    /// the sample ([`add_varying`](Self::add_varying)) and take the rest
+    /// ([`add_fixed`](Self::add_fixed)) from [`Level::fixed`]; this is the tests' reference
+    /// for both.
     #[cfg(test)]
     fn add_sampled(&mut self, t: f64, i: f64, i_sq: f64) {
+        self.add_fixed(t);
+        self.add_varying(t, i, i_sq);
+    }
+
+    /// The part of [`add_sampled`](Self::add_sampled) that does not depend on the sample:
+    /// the count, `Σt` and `Σt²`.
+    #[inline]
+    fn add_fixed(&mut self, t: f64) {
         self.n += 1.0;
         self.st += t;
         self.stt += t * t;
-        self.si += i;
-        self.sii += i * i;
-        self.sii_map += i_sq;
-        self.sti += t * i;
     }
 
     /// The part of [`add_sampled`](Self::add_sampled) that depends on the sample: a pass
@@ -894,25 +907,6 @@ impl Corr {
         let alpha = if vi > 1e-12 { c / vi } else { 0.0 };
         (alpha, (self.st - alpha * self.si) / self.n)
     }
-}
-
-#[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
-fn correlation_at(level: &Level, theta: &Theta) -> Option<f64> {
-    let mut c = Corr::default();
-    for y in 0..level.tof_h {
-        for x in 0..level.tof_w {
-            let i = y * level.tof_w + x;
-            let a = level.inv_depth[i];
-            if a <= 0.0 {
-                continue;
-            }
-            let (px, py) = landing(level, theta, x, y, a);
-            let s = sample(level, px, py).unwrap_or([0.0; 4]);
-            c.add_varying(level.t[i] as f64, s[0] as f64, s[3] as f64);
-        }
-    }
-    (c.n, c.st, c.stt) = (level.fixed.n, level.fixed.st, level.fixed.stt);
-    c.value()
 }
 
 /// Mean end-point distance between the flows of `a` and `b` over the valid ToF pixels of
@@ -1168,10 +1162,7 @@ fn search_offsets(level: &Level, initial: &Theta, params: &DirectFitParams) -> V
     points.sort_by_key(|p| p.layer);
     let mut fixed = vec![Corr::default(); layers];
     for p in &points {
-        let (c, t) = (&mut fixed[p.layer as usize], p.t as f64);
-        c.n += 1.0;
-        c.st += t;
-        c.stt += t * t;
+        fixed[p.layer as usize].add_fixed(p.t as f64);
     }
     let layer_points: Vec<&[SearchPoint]> = (0..layers)
         .map(|k| {
