@@ -16,6 +16,7 @@ pub mod error;
 pub mod kernel_apply;
 pub mod manifest;
 pub mod runner;
+mod stacked_input;
 
 pub use bundle::{hex_sha256, ModelBundle};
 pub use error::BundleError;

@@ -20,6 +20,7 @@ use crate::model::kernel_apply::{
     apply_gated, blend_classical, floor_expected_error, select_guarded, GatedKernel,
 };
 use crate::model::manifest::{output_contract, GraphOutput, GraphRole};
+use crate::model::stacked_input::{stack_concatenated_inputs, StackPart, STACKED_INPUT};
 use dear_capture::frame::Flow;
 
 /// Largest padded side a runner accepts: beyond it a single plane is gigabytes.
@@ -281,8 +282,10 @@ fn executor(_threads: usize) -> Result<Option<multithread::Executor>, String> {
 struct GraphRunner {
     role: GraphRole,
     state: TypedSimpleState,
-    /// `(name, channels)` per graph input, in the graph's order.
-    inputs: Vec<(String, usize)>,
+    /// Per graph input, in the graph's order, the provided inputs it is made of: the one of
+    /// its name, or for the stacked input (`stacked_input`) the parts of the concatenation it
+    /// replaces.
+    inputs: Vec<Vec<StackPart>>,
     out_channels: usize,
     /// The output is at 1/`out_stride` of the padded input and returned whole (not cropped).
     out_stride: usize,
@@ -319,7 +322,7 @@ impl GraphRunner {
         let contract = graph.role.contract();
         let (hp, wp) = padded;
         let mut model = graph.model.clone();
-        let mut inputs = Vec::with_capacity(graph.input_names.len());
+        let mut channels_of = std::collections::HashMap::new();
         for (i, name) in graph.input_names.iter().enumerate() {
             let channels = contract
                 .inputs
@@ -329,9 +332,33 @@ impl GraphRunner {
                 .expect("ModelBundle::load checked the input names");
             let fact = InferenceFact::dt_shape(f32::datum_type(), tvec![1, channels, hp, wp]);
             model.set_input_fact(i, fact).map_err(onnx_err)?;
-            inputs.push((name.clone(), channels));
+            channels_of.insert(name.clone(), channels);
         }
-        let typed = model.into_optimized().map_err(onnx_err)?;
+        let mut typed = model
+            .into_typed()
+            .and_then(|m| m.into_decluttered())
+            .map_err(onnx_err)?;
+        let stack = stack_concatenated_inputs(&mut typed).map_err(onnx_err)?;
+        let mut inputs = Vec::new();
+        for outlet in typed.input_outlets().map_err(onnx_err)? {
+            let name = &typed.node(outlet.node).name;
+            inputs.push(match (&stack, channels_of.get(name)) {
+                (Some(parts), _) if name == STACKED_INPUT => parts.clone(),
+                (_, Some(&channels)) => vec![StackPart {
+                    input: name.clone(),
+                    channels,
+                    scale: None,
+                }],
+                _ => {
+                    return Err(BundleError::Onnx {
+                        path: graph.path.clone(),
+                        graph: graph.role.name(),
+                        message: format!("input {name:?} is not an input of the bundle's contract"),
+                    })
+                }
+            });
+        }
+        let typed = typed.into_optimized().map_err(onnx_err)?;
         let out_channels = output.channels;
         let (ho, wo) = (hp / output.stride, wp / output.stride);
         let want: TVec<TDim> = tvec![1.into(), out_channels.into(), ho.into(), wo.into()];
@@ -402,28 +429,38 @@ impl GraphRunner {
                 .ok_or_else(|| run_err("no input planes".into()))?
         };
         let mut tensors: TVec<TValue> = TVec::with_capacity(self.inputs.len());
-        for (i, (name, channels)) in self.inputs.iter().enumerate() {
-            let planes = provided
-                .iter()
-                .find(|(n, _)| n == name)
-                .map(|(_, p)| *p)
-                .ok_or_else(|| run_err(format!("input {name:?} was not provided")))?;
-            if planes.len() != *channels {
-                return Err(run_err(format!(
-                    "input {name:?} has {} planes, expected {channels}",
-                    planes.len()
-                )));
-            }
-            for p in planes {
-                if p.dim() != dim {
-                    return Err(BundleError::InputShape {
-                        graph: self.role.name(),
-                        input: static_input(name),
-                        expected: dim,
-                        found: p.dim(),
-                    });
+        for (i, parts) in self.inputs.iter().enumerate() {
+            let mut stack: TVec<(&[ArrayView2<f32>], Option<f32>)> = TVec::new();
+            for StackPart {
+                input: name,
+                channels,
+                scale,
+            } in parts
+            {
+                let planes = provided
+                    .iter()
+                    .find(|(n, _)| n == name)
+                    .map(|(_, p)| *p)
+                    .ok_or_else(|| run_err(format!("input {name:?} was not provided")))?;
+                if planes.len() != *channels {
+                    return Err(run_err(format!(
+                        "input {name:?} has {} planes, expected {channels}",
+                        planes.len()
+                    )));
                 }
+                for p in planes {
+                    if p.dim() != dim {
+                        return Err(BundleError::InputShape {
+                            graph: self.role.name(),
+                            input: static_input(name),
+                            expected: dim,
+                            found: p.dim(),
+                        });
+                    }
+                }
+                stack.push((planes, *scale));
             }
+            let channels: usize = parts.iter().map(|p| p.channels).sum();
             let slot = &mut self.input_tensors[i];
             // Reuse last run's tensor when nothing else holds it; otherwise a new one.
             let reusable = slot.as_mut().and_then(Arc::get_mut);
@@ -431,12 +468,12 @@ impl GraphRunner {
                 Some(t) => t,
                 None => {
                     let (hp, wp) = self.padded;
-                    let fresh = Tensor::zero::<f32>(&[1, planes.len(), hp, wp])
+                    let fresh = Tensor::zero::<f32>(&[1, channels, hp, wp])
                         .map_err(|e| run_err(format!("{e:#}")))?;
                     Arc::get_mut(slot.insert(Arc::new(fresh))).expect("a new Arc is unique")
                 }
             };
-            fill_padded(self.padded, planes, tensor).map_err(|e| run_err(format!("{e:#}")))?;
+            fill_padded(self.padded, &stack, tensor).map_err(|e| run_err(format!("{e:#}")))?;
             tensors.push(slot.clone().expect("filled above").into_tvalue());
         }
         let result = self
@@ -473,29 +510,30 @@ impl GraphRunner {
     }
 }
 
-/// Writes `planes` into the `1 × C × H' × W'` tensor `t`, replicating the last row and column
-/// into the padding.
+/// Writes the planes of `parts`, one after the other, into the `1 × C × H' × W'` tensor `t`,
+/// replicating the last row and column into the padding; a part with a scale has each value
+/// multiplied by it (as the graph's own multiplication would, `stacked_input`).
 fn fill_padded(
     (hp, wp): (usize, usize),
-    planes: &[ArrayView2<f32>],
+    parts: &[(&[ArrayView2<f32>], Option<f32>)],
     t: &mut Tensor,
 ) -> TractResult<()> {
     let mut view = t.try_as_plain_ram_mut()?;
     let data = view.as_slice_mut::<f32>()?;
-    for (c, plane) in planes.iter().enumerate() {
+    let planes = parts
+        .iter()
+        .flat_map(|(planes, scale)| planes.iter().map(move |p| (p, *scale)));
+    for (c, (plane, scale)) in planes.enumerate() {
         let (h, w) = plane.dim();
         let base = c * hp * wp;
         for y in 0..hp {
             let src = plane.row(y.min(h - 1));
             let dst = &mut data[base + y * wp..base + (y + 1) * wp];
             match src.as_slice() {
-                Some(row) => {
-                    dst[..w].copy_from_slice(row);
-                    dst[w..].fill(row[w - 1]);
-                }
+                Some(row) => fill_row(dst, row, scale),
                 None => {
                     for (x, d) in dst.iter_mut().enumerate() {
-                        *d = src[x.min(w - 1)];
+                        *d = src[x.min(w - 1)] * scale.unwrap_or(1.0);
                     }
                 }
             }
@@ -504,10 +542,112 @@ fn fill_padded(
     Ok(())
 }
 
+/// `dst` is `row` (times `scale`), its last value repeated to the end.
+fn fill_row(dst: &mut [f32], row: &[f32], scale: Option<f32>) {
+    let w = row.len();
+    match scale {
+        None => dst[..w].copy_from_slice(row),
+        Some(s) => {
+            for (d, &x) in dst[..w].iter_mut().zip(row) {
+                *d = x * s;
+            }
+        }
+    }
+    let last = dst[w - 1];
+    dst[w..].fill(last);
+}
+
 /// Input names as `'static` strings for [`BundleError::InputShape`].
 fn static_input(name: &str) -> &'static str {
     ["rgb", "amplitude", "flow_rough", "flow_convt", "depth"]
         .into_iter()
         .find(|n| *n == name)
         .unwrap_or("input")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array2;
+    use std::path::PathBuf;
+
+    /// The runner feeds the stacked input (`stacked_input`) from the planes, scaled and
+    /// padded, so that its graph computes what the ONNX graph computes on the padded planes
+    /// given one by one, bit for bit: here against tract running the graph as written.
+    #[test]
+    fn a_runner_with_a_stacked_input_gives_the_graph_as_written_bit_for_bit() {
+        let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/edge");
+        let bundle = ModelBundle::load(&dir).unwrap();
+        // Not a multiple of the bundle's size multiple: the padding is exercised too.
+        let (h, w): (usize, usize) = (37, 45);
+        let m = bundle.input_size_multiple();
+        let padded = (h.div_ceil(m) * m, w.div_ceil(m) * m);
+        for role in [GraphRole::Fuse, GraphRole::Refine] {
+            let graph = bundle.graph(role);
+            let output = output_contract(role, bundle.refine_apply());
+            let mut runner =
+                GraphRunner::new(graph, padded, &RunOptions::default(), output).unwrap();
+            assert!(
+                runner.inputs.iter().any(|parts| parts.len() > 1),
+                "{role:?}: no stacked input"
+            );
+            let contract = role.contract();
+            let planes: Vec<(String, Vec<Array2<f32>>)> = graph
+                .input_names
+                .iter()
+                .enumerate()
+                .map(|(i, name)| {
+                    let c = contract.inputs.iter().find(|c| c.0 == name).unwrap().1;
+                    let planes = (0..c)
+                        .map(|k| {
+                            Array2::from_shape_fn((h, w), |(y, x)| {
+                                let v = (y * 131 + x * 71 + (i * 3 + k) * 977) % 1009;
+                                0.3 + v as f32 / 211.0
+                            })
+                        })
+                        .collect();
+                    (name.clone(), planes)
+                })
+                .collect();
+            let views: Vec<(String, Vec<ArrayView2<f32>>)> = planes
+                .iter()
+                .map(|(n, p)| (n.clone(), p.iter().map(|a| a.view()).collect()))
+                .collect();
+            let provided: Vec<(&str, &[ArrayView2<f32>])> = views
+                .iter()
+                .map(|(n, v)| (n.as_str(), v.as_slice()))
+                .collect();
+            let (ho, wo) = (padded.0 / output.stride, padded.1 / output.stride);
+            let out_dim = if output.stride == 1 { (h, w) } else { (ho, wo) };
+            let mut got: Vec<Array2<f32>> = (0..output.channels)
+                .map(|_| Array2::zeros(out_dim))
+                .collect();
+            let mut views: Vec<ArrayViewMut2<f32>> = got.iter_mut().map(|g| g.view_mut()).collect();
+            runner.run(&provided, &mut views).unwrap();
+
+            // The graph as written, each input padded into a tensor of its own.
+            let mut model = graph.model.clone();
+            let mut inputs = TVec::new();
+            for (i, (_, p)) in planes.iter().enumerate() {
+                let shape = [1, p.len(), padded.0, padded.1];
+                // Replicate-padded at the bottom and right, written out here on its own.
+                let t = tract_ndarray::Array4::from_shape_fn(shape, |(_, c, y, x)| {
+                    p[c][[y.min(h - 1), x.min(w - 1)]]
+                });
+                let t = Tensor::from(t);
+                model.set_input_fact(i, f32::fact(shape).into()).unwrap();
+                inputs.push(t.into_tvalue());
+            }
+            let plan = model.into_optimized().unwrap().into_runnable().unwrap();
+            let want = plan.run(inputs).unwrap().remove(0).into_tensor();
+            let want = want.to_plain_array_view::<f32>().unwrap();
+            let mut differ = 0;
+            for (c, g) in got.iter().enumerate() {
+                for ((y, x), v) in g.indexed_iter() {
+                    differ += usize::from(v.to_bits() != want[[0, c, y, x]].to_bits());
+                }
+            }
+            assert_eq!(differ, 0, "{role:?}: {differ} values differ");
+        }
+    }
 }
