@@ -107,19 +107,21 @@ pub enum EngineError {
 /// estimator on the first frame after it is ready.
 ///
 /// The latency is interpolated linearly in the pixel count between two measured points (and
-/// extrapolated beyond them): `deard-bench --mode every-frame` on the 2-core reference machine
-/// of RESULTS.md's speed tables spends 197 ms per 320×240 frame and 350 ms per 640×480 frame,
-/// of which the refinement, warps and edge check (what a measurement does not run) take 12 and
-/// 40 ms; the worker, at the lowest priority, gets about one of the two cores while the frame
-/// path keeps up. So 185 ms and 310 ms: 6 frames at 30 fps for 320×240, 10 for 640×480.
-/// Checked with deard itself (`RUST_LOG=warn,dear_pipeline::engine=debug deard --replay SEQ
-/// --pacing timestamps` on RESULTS.md's 300-frame 320×240 sequence, on a busy 2-core
-/// machine, 2026-11-27): the worker's measurements took 181–244 ms (the first, cold, 344 ms),
-/// and during the warm-up, which asks again on the frame a measurement is delivered, the
-/// second measurement was of the frame 6 frames after the first warm one.
+/// extrapolated beyond them), each the median of deard's own warm measurements on the 2-core
+/// reference machine of RESULTS.md's speed tables, replaying at 30 fps with the defaults
+/// (`RUST_LOG=warn,dear_pipeline::engine=debug deard --replay SEQ --pacing timestamps
+/// --bundle models/edge`, the `elapsed_ms` of each "background calibration delivered" line):
+/// 124 ms on RESULTS.md's 300-frame 320×240 sequence (11 measurements, 110–147 ms; the first,
+/// cold, 204 ms) and 360 ms on its 640×480 drifting sequence repeated (`vga_sequence-x50`, 24
+/// measurements, 272–485 ms: about 300 when the step is rejected, 430 when it is accepted;
+/// the first, cold, 676 ms). The worker runs at the lowest priority beside the frame path, so
+/// at 640×480 it takes longer than the same measurement alone on one core (about 250 ms). So
+/// 4 frames at 30 fps for 320×240 (2 at 15 fps) and 11 for 640×480; during the warm-up, which
+/// asks again on the frame a measurement is delivered, the 320×240 run measured frame 8 and
+/// then frame 12.
 pub fn typical_delay_frames(width: usize, height: usize, fps: f64) -> NonZeroU32 {
-    const SMALL: (f64, f64) = (320.0 * 240.0, 0.185);
-    const LARGE: (f64, f64) = (640.0 * 480.0, 0.310);
+    const SMALL: (f64, f64) = (320.0 * 240.0, 0.124);
+    const LARGE: (f64, f64) = (640.0 * 480.0, 0.360);
     let pixels = (width * height) as f64;
     let slope = (LARGE.1 - SMALL.1) / (LARGE.0 - SMALL.0);
     let latency_s = (SMALL.1 + slope * (pixels - SMALL.0)).max(0.0);
@@ -653,12 +655,12 @@ mod tests {
     #[test]
     fn the_typical_delay_is_the_measurement_latency_in_frames_rounded_up() {
         let frames = |w, h, fps| typical_delay_frames(w, h, fps).get();
-        // 185 ms and 310 ms (the module's reference points) at 30 and 15 fps.
-        assert_eq!(frames(320, 240, 30.0), 6);
-        assert_eq!(frames(320, 240, 15.0), 3);
-        assert_eq!(frames(640, 480, 30.0), 10);
-        // In between, linear in the pixel count: 226.7 ms, 9.07 frames at 40 fps.
-        assert_eq!(frames(480, 320, 40.0), 10);
+        // 124 ms and 360 ms (the module's reference points) at 30 and 15 fps.
+        assert_eq!(frames(320, 240, 30.0), 4);
+        assert_eq!(frames(320, 240, 15.0), 2);
+        assert_eq!(frames(640, 480, 30.0), 11);
+        // In between, linear in the pixel count: 202.7 ms, 8.11 frames at 40 fps.
+        assert_eq!(frames(480, 320, 40.0), 9);
         // At least one frame: a result cannot reach the frame that asked for it.
         assert_eq!(frames(16, 16, 1.0), 1);
         assert_eq!(frames(320, 240, f64::NAN), 1);
