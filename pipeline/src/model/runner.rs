@@ -20,7 +20,9 @@ use crate::model::kernel_apply::{
     apply_gated, blend_classical, floor_expected_error, select_guarded, GatedKernel,
 };
 use crate::model::manifest::{output_contract, GraphOutput, GraphRole};
-use crate::model::stacked_input::{stack_concatenated_inputs, StackPart, STACKED_INPUT};
+use crate::model::stacked_input::{
+    average_pool_row, stack_concatenated_inputs, Stack, StackPart, Transform,
+};
 use dear_capture::frame::Flow;
 
 /// Largest padded side a runner accepts: beyond it a single plane is gigabytes.
@@ -282,10 +284,10 @@ fn executor(_threads: usize) -> Result<Option<multithread::Executor>, String> {
 struct GraphRunner {
     role: GraphRole,
     state: TypedSimpleState,
-    /// Per graph input, in the graph's order, the provided inputs it is made of: the one of
-    /// its name, or for the stacked input (`stacked_input`) the parts of the concatenation it
-    /// replaces.
-    inputs: Vec<Vec<StackPart>>,
+    /// Per graph input, in the graph's order, its shape and the provided inputs it is made of:
+    /// the one of its name, or for a stacked input (`stacked_input`) the parts of the
+    /// concatenation it replaces.
+    inputs: Vec<Stack>,
     out_channels: usize,
     /// The output is at 1/`out_stride` of the padded input and returned whole (not cropped).
     out_stride: usize,
@@ -294,6 +296,8 @@ struct GraphRunner {
     /// fresh 640×480 tensor per input and frame cost page faults (the kernel zeroing new
     /// pages) comparable to the small convolutions.
     input_tensors: Vec<Option<Arc<Tensor>>>,
+    /// Scratch: the padded input rows of a pooled part (`stacked_input::Transform`).
+    pool_rows: Vec<f32>,
 }
 
 impl std::fmt::Debug for GraphRunner {
@@ -338,18 +342,23 @@ impl GraphRunner {
             .into_typed()
             .and_then(|m| m.into_decluttered())
             .map_err(onnx_err)?;
-        let stack = stack_concatenated_inputs(&mut typed).map_err(onnx_err)?;
+        let stacks = stack_concatenated_inputs(&mut typed).map_err(onnx_err)?;
         let mut inputs = Vec::new();
         for outlet in typed.input_outlets().map_err(onnx_err)? {
             let name = &typed.node(outlet.node).name;
-            inputs.push(match (&stack, channels_of.get(name)) {
-                (Some(parts), _) if name == STACKED_INPUT => parts.clone(),
-                (_, Some(&channels)) => vec![StackPart {
-                    input: name.clone(),
-                    channels,
-                    scale: None,
-                }],
-                _ => {
+            let stack = stacks.iter().find(|s| &s.name == name);
+            inputs.push(match (stack, channels_of.get(name)) {
+                (Some(stack), _) => stack.clone(),
+                (None, Some(&channels)) => Stack {
+                    name: name.clone(),
+                    shape: [1, channels, hp, wp],
+                    parts: vec![StackPart {
+                        input: name.clone(),
+                        channels,
+                        transform: Transform::None,
+                    }],
+                },
+                (None, None) => {
                     return Err(BundleError::Onnx {
                         path: graph.path.clone(),
                         graph: graph.role.name(),
@@ -386,6 +395,7 @@ impl GraphRunner {
             out_stride: output.stride,
             padded,
             input_tensors,
+            pool_rows: Vec::new(),
         })
     }
 
@@ -429,13 +439,13 @@ impl GraphRunner {
                 .ok_or_else(|| run_err("no input planes".into()))?
         };
         let mut tensors: TVec<TValue> = TVec::with_capacity(self.inputs.len());
-        for (i, parts) in self.inputs.iter().enumerate() {
-            let mut stack: TVec<(&[ArrayView2<f32>], Option<f32>)> = TVec::new();
+        for (i, spec) in self.inputs.iter().enumerate() {
+            let mut stack: TVec<(&[ArrayView2<f32>], Transform)> = TVec::new();
             for StackPart {
                 input: name,
                 channels,
-                scale,
-            } in parts
+                transform,
+            } in &spec.parts
             {
                 let planes = provided
                     .iter()
@@ -458,22 +468,21 @@ impl GraphRunner {
                         });
                     }
                 }
-                stack.push((planes, *scale));
+                stack.push((planes, *transform));
             }
-            let channels: usize = parts.iter().map(|p| p.channels).sum();
             let slot = &mut self.input_tensors[i];
             // Reuse last run's tensor when nothing else holds it; otherwise a new one.
             let reusable = slot.as_mut().and_then(Arc::get_mut);
             let tensor = match reusable {
                 Some(t) => t,
                 None => {
-                    let (hp, wp) = self.padded;
-                    let fresh = Tensor::zero::<f32>(&[1, channels, hp, wp])
-                        .map_err(|e| run_err(format!("{e:#}")))?;
+                    let fresh =
+                        Tensor::zero::<f32>(&spec.shape).map_err(|e| run_err(format!("{e:#}")))?;
                     Arc::get_mut(slot.insert(Arc::new(fresh))).expect("a new Arc is unique")
                 }
             };
-            fill_padded(self.padded, &stack, tensor).map_err(|e| run_err(format!("{e:#}")))?;
+            fill_padded(self.padded, &stack, tensor, &mut self.pool_rows)
+                .map_err(|e| run_err(format!("{e:#}")))?;
             tensors.push(slot.clone().expect("filled above").into_tvalue());
         }
         let result = self
@@ -510,31 +519,55 @@ impl GraphRunner {
     }
 }
 
-/// Writes the planes of `parts`, one after the other, into the `1 × C × H' × W'` tensor `t`,
-/// replicating the last row and column into the padding; a part with a scale has each value
-/// multiplied by it (as the graph's own multiplication would, `stacked_input`).
+/// Writes the planes of `parts`, one after the other, into the `1 × C × H × W` tensor `t`: each
+/// plane replicate-padded to the runner's `H' × W'` (its last row and column repeated), then
+/// transformed as its part says (`stacked_input::Transform`: as it is, scaled, or pooled, which
+/// makes `H × W` smaller than `H' × W'`). `rows` is scratch for a pool's padded rows.
 fn fill_padded(
     (hp, wp): (usize, usize),
-    parts: &[(&[ArrayView2<f32>], Option<f32>)],
+    parts: &[(&[ArrayView2<f32>], Transform)],
     t: &mut Tensor,
+    rows: &mut Vec<f32>,
 ) -> TractResult<()> {
+    let (th, tw) = (t.shape()[2], t.shape()[3]);
     let mut view = t.try_as_plain_ram_mut()?;
     let data = view.as_slice_mut::<f32>()?;
     let planes = parts
         .iter()
-        .flat_map(|(planes, scale)| planes.iter().map(move |p| (p, *scale)));
-    for (c, (plane, scale)) in planes.enumerate() {
-        let (h, w) = plane.dim();
-        let base = c * hp * wp;
-        for y in 0..hp {
+        .flat_map(|(planes, transform)| planes.iter().map(move |p| (p, *transform)));
+    for (c, (plane, transform)) in planes.enumerate() {
+        let out = &mut data[c * th * tw..(c + 1) * th * tw];
+        let h = plane.nrows();
+        let padded_row = |y: usize, dst: &mut [f32], scale: Option<f32>| {
             let src = plane.row(y.min(h - 1));
-            let dst = &mut data[base + y * wp..base + (y + 1) * wp];
             match src.as_slice() {
                 Some(row) => fill_row(dst, row, scale),
                 None => {
+                    let w = src.len();
                     for (x, d) in dst.iter_mut().enumerate() {
                         *d = src[x.min(w - 1)] * scale.unwrap_or(1.0);
                     }
+                }
+            }
+        };
+        match transform {
+            Transform::None | Transform::Scale(_) => {
+                let scale = match transform {
+                    Transform::Scale(s) => Some(s),
+                    _ => None,
+                };
+                for (y, dst) in out.chunks_exact_mut(wp).enumerate().take(hp) {
+                    padded_row(y, dst, scale);
+                }
+            }
+            Transform::AveragePool(k) => {
+                rows.resize(k * wp, 0.0);
+                for (by, dst) in out.chunks_exact_mut(tw).enumerate() {
+                    for (dy, row) in rows.chunks_exact_mut(wp).enumerate() {
+                        padded_row(by * k + dy, row, None);
+                    }
+                    let rows: TVec<&[f32]> = rows.chunks_exact(wp).collect();
+                    average_pool_row(&rows, k, dst);
                 }
             }
         }
@@ -588,7 +621,7 @@ mod tests {
             let mut runner =
                 GraphRunner::new(graph, padded, &RunOptions::default(), output).unwrap();
             assert!(
-                runner.inputs.iter().any(|parts| parts.len() > 1),
+                runner.inputs.iter().any(|s| s.parts.len() > 1),
                 "{role:?}: no stacked input"
             );
             let contract = role.contract();
