@@ -481,7 +481,7 @@ impl GraphRunner {
                     Arc::get_mut(slot.insert(Arc::new(fresh))).expect("a new Arc is unique")
                 }
             };
-            fill_padded(self.padded, &stack, tensor, &mut self.pool_rows)
+            fill_padded(self.padded.1, &stack, tensor, &mut self.pool_rows)
                 .map_err(|e| run_err(format!("{e:#}")))?;
             tensors.push(slot.clone().expect("filled above").into_tvalue());
         }
@@ -520,11 +520,12 @@ impl GraphRunner {
 }
 
 /// Writes the planes of `parts`, one after the other, into the `1 × C × H × W` tensor `t`: each
-/// plane replicate-padded to the runner's `H' × W'` (its last row and column repeated), then
-/// transformed as its part says (`stacked_input::Transform`: as it is, scaled, or pooled, which
-/// makes `H × W` smaller than `H' × W'`). `rows` is scratch for a pool's padded rows.
+/// plane replicate-padded to the runner's `H' × W'` (its last row and column repeated; `wp` is
+/// `W'`), then transformed as its part says (`stacked_input::Transform`: as it is, scaled, or
+/// pooled, which makes `H × W` smaller than `H' × W'`). `rows` is scratch for a pool's padded
+/// rows.
 fn fill_padded(
-    (hp, wp): (usize, usize),
+    wp: usize,
     parts: &[(&[ArrayView2<f32>], Transform)],
     t: &mut Tensor,
     rows: &mut Vec<f32>,
@@ -545,21 +546,20 @@ fn fill_padded(
                 None => {
                     let w = src.len();
                     for (x, d) in dst.iter_mut().enumerate() {
-                        *d = src[x.min(w - 1)] * scale.unwrap_or(1.0);
+                        let v = src[x.min(w - 1)];
+                        *d = scale.map_or(v, |s| v * s);
                     }
                 }
             }
         };
-        match transform {
-            Transform::None | Transform::Scale(_) => {
-                let scale = match transform {
-                    Transform::Scale(s) => Some(s),
-                    _ => None,
-                };
-                for (y, dst) in out.chunks_exact_mut(wp).enumerate().take(hp) {
-                    padded_row(y, dst, scale);
-                }
+        let mut padded_rows = |scale: Option<f32>| {
+            for (y, dst) in out.chunks_exact_mut(wp).enumerate() {
+                padded_row(y, dst, scale);
             }
+        };
+        match transform {
+            Transform::None => padded_rows(None),
+            Transform::Scale(s) => padded_rows(Some(s)),
             Transform::AveragePool(k) => {
                 rows.resize(k * wp, 0.0);
                 for (by, dst) in out.chunks_exact_mut(tw).enumerate() {
