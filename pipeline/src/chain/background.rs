@@ -9,18 +9,25 @@
 //! is delivered to the online estimator on the first frame after it is ready, and the frames
 //! after that use the updated estimate.
 //!
-//! The worker runs at the lowest scheduling priority (nice +19 above the thread that calls it,
-//! capped at 19), so on a two-core board it takes what the frame path leaves instead of
-//! competing with it. The measurement's parallel loops (the direct fit's candidate search and
-//! residuals, the splat) run on a rayon pool of the worker's own, as many threads as the
-//! caller's pool and each at the worker's priority: on the global pool they would run on the
-//! frame path's threads at its priority, and a frame's stages would wait behind them. With
-//! frames overlapping, the frame path keeps both cores busy when it falls behind, and at nice
-//! +10 the worker's 0.3 s measurement every 30 frames still slowed the frames around it:
-//! `deard-bench` at 640×480, 200 frames back to back, p95 82.5 / 78.6 ms
-//! and median 43.8 / 44.7 at +10 against 56.8 / 53.2 and 41.2 / 39.0 at +19 (alternating
-//! runs, 2026-11-26). The price is paid only under that overload: the worker delivered 2–3
-//! measurements in those 200 frames instead of 7–8; a daemon that keeps up leaves idle time
+//! The worker runs at the lowest scheduling priority, so that on a two-core board it takes what
+//! the frame path leaves instead of competing with it: Linux's `SCHED_IDLE` policy, and nice +19
+//! above the thread that calls it (capped at 19), which is what remains where the policy cannot
+//! be set. The measurement's parallel loops (the direct fit's candidate search and residuals,
+//! the splat) run on a rayon pool of the worker's own, as many threads as the caller's pool and
+//! each at the worker's priority: on the global pool they would run on the frame path's threads
+//! at its priority, and a frame's stages would wait behind them. With frames overlapping, the
+//! frame path keeps both cores busy when it falls behind, and at nice +10 the worker's 0.3 s
+//! measurement every 30 frames still slowed the frames around it: `deard-bench` at 640×480,
+//! 200 frames back to back, p95 82.5 / 78.6 ms and median 43.8 / 44.7 at +10 against 56.8 /
+//! 53.2 and 41.2 / 39.0 at +19 (alternating runs, 2026-11-26). Nice +19 still left a frame
+//! thread that woke on a core where the worker ran waiting for the worker's time slice (the
+//! kernel's EEVDF scheduler protects a running task's slice whatever its weight); a waking
+//! thread of the normal policy preempts a `SCHED_IDLE` one at once. With frames back to back
+//! on two cores the p95 went from 28.6 / 30.7 / 27.9 ms to 17.9 / 17.8 / 24.4 (medians 14.6 /
+//! 15.3 / 14.5 → 13.8 / 14.4 / 14.3), and at 30 fps on one core the p95 latency from 53.7 to
+//! 29.8 ms, with as many measurements delivered (2026-11-29; docs/performance.md). The price
+//! is paid only under overload, where the worker gets less: in 300 frames back to back on
+//! two cores it started 2 measurements instead of 6; a daemon that keeps up leaves idle time,
 //! and the worker runs in it whatever its priority.
 //!
 //! One measurement is in flight at a time: while the worker is busy a new request is answered
@@ -42,8 +49,8 @@ use ndarray::{Array2, Array3};
 use crate::chain::dear_chain::{ChainError, ChainInput, DearChain, MeasureReport};
 use dear_capture::calibration::Calibration;
 
-/// The worker's nice value relative to the caller (Linux: nice is per thread); see the module
-/// documentation for why the lowest.
+/// The worker's nice value relative to the caller (Linux: nice is per thread), where
+/// `SCHED_IDLE` cannot be set; see the module documentation for why the lowest.
 const WORKER_NICE: i32 = 19;
 
 /// Owned copies of one frame's sensor planes, reused between jobs.
@@ -360,11 +367,13 @@ fn worker_pool(name: &str) -> std::io::Result<rayon::ThreadPool> {
         .map_err(std::io::Error::other)
 }
 
-/// Lowers the calling thread's scheduling priority by [`WORKER_NICE`] (Linux: the nice value
-/// is per thread). Best effort: a failure leaves the worker at the caller's priority.
+/// Lowers the calling thread's scheduling priority to the lowest (Linux: nice value and
+/// policy are per thread): nice +[`WORKER_NICE`], then the `SCHED_IDLE` policy. Best effort: a
+/// failure leaves the worker at the priority it had (logged at debug level).
 fn lower_priority() {
     #[cfg(target_os = "linux")]
-    // SAFETY: getpriority/setpriority take plain integers; `who = 0` names the calling thread.
+    // SAFETY: getpriority/setpriority take plain integers, sched_setscheduler a pointer to a
+    // live `sched_param`; `who = 0` / `pid = 0` name the calling thread.
     unsafe {
         *libc::__errno_location() = 0;
         let current = libc::getpriority(libc::PRIO_PROCESS, 0);
@@ -372,5 +381,12 @@ fn lower_priority() {
             return;
         }
         let _ = libc::setpriority(libc::PRIO_PROCESS, 0, (current + WORKER_NICE).min(19));
+        let param = libc::sched_param { sched_priority: 0 };
+        if libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) != 0 {
+            tracing::debug!(
+                error = %std::io::Error::last_os_error(),
+                "the calibration worker stays at nice +{WORKER_NICE}: SCHED_IDLE refused"
+            );
+        }
     }
 }
