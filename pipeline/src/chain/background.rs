@@ -19,16 +19,16 @@
 //! frame path keeps both cores busy when it falls behind, and at nice +10 the worker's 0.3 s
 //! measurement every 30 frames still slowed the frames around it: `deard-bench` at 640×480,
 //! 200 frames back to back, p95 82.5 / 78.6 ms and median 43.8 / 44.7 at +10 against 56.8 /
-//! 53.2 and 41.2 / 39.0 at +19 (alternating runs, 2026-11-26). Nice +19 still left a frame
-//! thread that woke on a core where the worker ran waiting for the worker's time slice (the
-//! kernel's EEVDF scheduler protects a running task's slice whatever its weight); a waking
-//! thread of the normal policy preempts a `SCHED_IDLE` one at once. With frames back to back
-//! on two cores the p95 went from 28.6 / 30.7 / 27.9 ms to 17.9 / 17.8 / 24.4 (medians 14.6 /
-//! 15.3 / 14.5 → 13.8 / 14.4 / 14.3), and at 30 fps on one core the p95 latency from 53.7 to
-//! 29.8 ms, with as many measurements delivered (2026-11-29; docs/performance.md). The price
-//! is paid only under overload, where the worker gets less: in 300 frames back to back on
-//! two cores it started 2 measurements instead of 6; a daemon that keeps up leaves idle time,
-//! and the worker runs in it whatever its priority.
+//! 53.2 and 41.2 / 39.0 at +19 (alternating runs, 2026-11-26). At nice +19 a frame thread
+//! that woke on the worker's core could still wait behind it (under the kernel's EEVDF
+//! scheduler a waking thread need not preempt a running one before the latter's slice is
+//! used, whatever their weights); the kernel preempts a `SCHED_IDLE` thread for any waking
+//! thread of the normal policy. With frames back to back on two cores the p95 went from
+//! 28.6 / 29.4 / 29.9 ms to 19.5 / 17.6 / 17.9 (medians 15.5 / 15.3 / 15.9 → 14.2 / 14.3 /
+//! 14.5; alternating runs, 2026-11-29, docs/performance.md). The price is paid only under
+//! overload, where the worker gets less: in 300 frames back to back on two cores it started 2
+//! measurements instead of 6; at 30 fps it started as many as at nice +19, and a daemon that
+//! keeps up leaves idle time the worker runs in whatever its priority.
 //!
 //! One measurement is in flight at a time: while the worker is busy a new request is answered
 //! [`Submit::Busy`] and the caller simply asks again on a later frame.
