@@ -375,17 +375,17 @@ fn lower_priority() {
     // SAFETY: getpriority/setpriority take plain integers, sched_setscheduler a pointer to a
     // live `sched_param`; `who = 0` / `pid = 0` name the calling thread.
     unsafe {
+        // The nice value first: it is what stays where the policy cannot be set.
         *libc::__errno_location() = 0;
         let current = libc::getpriority(libc::PRIO_PROCESS, 0);
-        if current == -1 && *libc::__errno_location() != 0 {
-            return;
+        if current != -1 || *libc::__errno_location() == 0 {
+            let _ = libc::setpriority(libc::PRIO_PROCESS, 0, (current + WORKER_NICE).min(19));
         }
-        let _ = libc::setpriority(libc::PRIO_PROCESS, 0, (current + WORKER_NICE).min(19));
         let param = libc::sched_param { sched_priority: 0 };
         if libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) != 0 {
             tracing::debug!(
                 error = %std::io::Error::last_os_error(),
-                "the calibration worker stays at nice +{WORKER_NICE}: SCHED_IDLE refused"
+                "the calibration worker keeps the normal policy: SCHED_IDLE refused"
             );
         }
     }
