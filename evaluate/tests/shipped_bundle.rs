@@ -12,7 +12,7 @@ use dear_eval::{
     OnlineBundleMethod,
 };
 use dear_pipeline::engine::{typical_delay_frames, MeasurementSchedule};
-use dear_pipeline::model::ModelBundle;
+use dear_pipeline::model::{ClassicalEstimate, ModelBundle};
 use dear_pipeline::recalibration::OnlineConfig;
 
 fn root() -> PathBuf {
@@ -176,7 +176,10 @@ fn the_shipped_refiner_bounds_its_change_to_clean_depth() {
                 amp.view(),
                 clean.view(),
                 Some([planes[0].view(), planes[1].view(), planes[2].view()]),
-                classical.is_some().then(|| classical_depth.view()),
+                classical.is_some().then(|| ClassicalEstimate {
+                    depth: classical_depth.view(),
+                    confidence: classical_confidence.view(),
+                }),
                 out.view_mut(),
             )
             .unwrap();

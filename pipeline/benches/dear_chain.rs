@@ -17,7 +17,8 @@ use dear_pipeline::chain::{
     CachedFusion, ChainInput, ChainMode, ChainOptions, ChainOutput, DearChain,
 };
 use dear_pipeline::model::kernel_apply::{apply_gated, GatedKernel, GATED_CHANNELS};
-use dear_pipeline::model::{ModelBundle, RunnerOptions};
+use dear_pipeline::model::manifest::JumpOn;
+use dear_pipeline::model::{ClassicalEstimate, ModelBundle, RunnerOptions};
 use ndarray::{Array2, Array3};
 
 // The daemon's allocator (see deard's main.rs: with glibc's malloc, tract's large intermediate
@@ -128,9 +129,7 @@ fn bench(c: &mut Criterion) {
         // A hybrid refiner also takes the classical filter's output (computed once here: the
         // refine_net row times the graph and its tail; the frame rows include the filter).
         let classical = chain.runner_mut().refine_uses_classical().then(|| {
-            dear_pipeline::filter::ClassicalRefiner::default()
-                .refine(depth_w.view(), rgb.view())
-                .0
+            dear_pipeline::filter::ClassicalRefiner::default().refine(depth_w.view(), rgb.view())
         });
         group.bench_function(format!("flow_net{suffix}"), |b| {
             b.iter(|| {
@@ -162,7 +161,12 @@ fn bench(c: &mut Criterion) {
                         amp_w.view(),
                         depth_w.view(),
                         Some([planes[0].view(), planes[1].view(), planes[2].view()]),
-                        classical.as_ref().map(|c| c.view()),
+                        classical
+                            .as_ref()
+                            .map(|(depth, confidence)| ClassicalEstimate {
+                                depth: depth.view(),
+                                confidence: confidence.view(),
+                            }),
                         depth_out.view_mut(),
                     )
                     .unwrap();
@@ -204,6 +208,7 @@ fn bench_gated_tail(c: &mut Criterion) {
         range_scale: 100.0,
         max_depth_m: 10.0,
         jump_scale: None,
+        jump_on: JumpOn::EveryPixel,
         errors: None,
     };
     let mut out = Array2::zeros((H, W));

@@ -6,9 +6,10 @@
 mod common;
 
 use dear_pipeline::model::kernel_apply::{
-    apply_gated, blend_classical, select_guarded, ErrorMaps, GatedKernel, GATED_CHANNELS,
-    GUARDED_CHANNELS, HYBRID_CHANNELS,
+    apply_gated, blend_classical, select_guarded, ClassicalEstimate, ErrorMaps, GatedKernel,
+    GATED_CHANNELS, GUARDED_CHANNELS, HYBRID_CHANNELS,
 };
+use dear_pipeline::model::manifest::JumpOn;
 use ndarray::{Array2, Array3};
 
 #[test]
@@ -38,23 +39,24 @@ fn gated_tail_matches_pytorch() {
     assert!(moved > out.len() / 4, "only {moved} pixels changed");
 }
 
-/// The hybrid refinement of `depth`: the per-pixel blend with the classical estimate, then the
-/// gated kernel (what the guarded tail selects its `refined` candidate from).
+/// The hybrid refinement of `depth`: the per-pixel blend with the classical estimate (its
+/// confidence: measured everywhere unless given), then the gated kernel (what the guarded tail
+/// selects its `refined` candidate from).
 fn hybrid_tail(
     maps: &[Array2<f32>],
     depth: &Array2<f32>,
     classical: &Array2<f32>,
+    confidence: Option<&Array2<u8>>,
     kernel: &GatedKernel,
 ) -> Array2<f32> {
     let mut base = Array2::zeros(depth.dim());
     let mut out = Array2::zeros(depth.dim());
-    blend_classical(
-        maps,
-        depth.view(),
-        classical.view(),
-        base.view_mut(),
-        kernel,
-    );
+    let measured = Array2::from_elem(depth.dim(), 255u8);
+    let estimate = ClassicalEstimate {
+        depth: classical.view(),
+        confidence: confidence.unwrap_or(&measured).view(),
+    };
+    blend_classical(maps, depth.view(), estimate, base.view_mut(), kernel);
     apply_gated(maps, base.view(), out.view_mut(), kernel);
     out
 }
@@ -89,6 +91,7 @@ fn kernel(
         range_scale: 100.0,
         max_depth_m: doc["max_depth_m"].as_f64().unwrap() as f32,
         jump_scale,
+        jump_on: JumpOn::EveryPixel,
         errors,
     }
 }
@@ -101,7 +104,7 @@ fn hybrid_tail_matches_pytorch() {
     let maps = maps(&doc, HYBRID_CHANNELS);
     let want = plane(&doc["out"]);
     let kernel = kernel(&doc, Some(300.0), None);
-    let out = hybrid_tail(&maps, &depth, &classical, &kernel);
+    let out = hybrid_tail(&maps, &depth, &classical, None, &kernel);
     let worst = out
         .iter()
         .zip(want.iter())
@@ -128,6 +131,46 @@ fn hybrid_tail_matches_pytorch() {
 }
 
 #[test]
+fn hybrid_tail_with_the_jump_on_replaced_pixels_matches_pytorch() {
+    let doc = fixture("hybrid_replaced.json");
+    let depth = plane(&doc["depth"]);
+    let classical = plane(&doc["classical"]);
+    let confidence = plane(&doc["classical_confidence"]).mapv(|c| c as u8);
+    let maps = maps(&doc, HYBRID_CHANNELS);
+    let want = plane(&doc["out"]);
+    let kernel = GatedKernel {
+        jump_on: JumpOn::Replaced,
+        ..kernel(&doc, Some(300.0), None)
+    };
+    let out = hybrid_tail(&maps, &depth, &classical, Some(&confidence), &kernel);
+    let worst = out
+        .iter()
+        .zip(want.iter())
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    println!("hybrid tail, jump on replaced pixels, vs PyTorch: max |Δ| = {worst:.2e} m");
+    assert!(worst < 1e-5, "max |Rust − PyTorch| = {worst} m");
+    // The case exercises the restriction: with the jump everywhere, some far moves the filter
+    // measured (smoothed) are followed that are not followed here.
+    let every = hybrid_tail(
+        &maps,
+        &depth,
+        &classical,
+        Some(&confidence),
+        &GatedKernel {
+            jump_on: JumpOn::EveryPixel,
+            ..kernel
+        },
+    );
+    let differ = out
+        .iter()
+        .zip(every.iter())
+        .filter(|(a, b)| (*a - *b).abs() > 0.1)
+        .count();
+    assert!(differ > 5, "only {differ} pixels depend on the restriction");
+}
+
+#[test]
 fn guarded_tail_matches_pytorch() {
     let doc = fixture("guarded.json");
     let depth = plane(&doc["depth"]);
@@ -141,7 +184,7 @@ fn guarded_tail_matches_pytorch() {
         floor: None,
     };
     let kernel = kernel(&doc, Some(300.0), Some(errors));
-    let refined = hybrid_tail(&maps, &depth, &classical, &kernel);
+    let refined = hybrid_tail(&maps, &depth, &classical, None, &kernel);
     // select_guarded takes the refined candidate in the plane it publishes into.
     let mut out = refined.clone();
     let mut log_error = Array2::zeros(depth.dim());

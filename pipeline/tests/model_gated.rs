@@ -105,7 +105,7 @@ fn guarded(m: &mut serde_json::Value) {
 
 #[test]
 fn malformed_apply_entries_are_refused_by_name() {
-    let cases: [(&str, Edit); 13] = [
+    let cases: [(&str, Edit); 15] = [
         (
             "apply.kind \"sharpen\"",
             Box::new(|m| m["graphs"]["refine"]["apply"]["kind"] = "sharpen".into()),
@@ -117,6 +117,17 @@ fn malformed_apply_entries_are_refused_by_name() {
         (
             "apply.jump_scale belongs to \"hybrid-kernel\" and \"guarded-kernel\", not \"gated-kernel\"",
             Box::new(|m| m["graphs"]["refine"]["apply"]["jump_scale"] = 300.0.into()),
+        ),
+        (
+            "apply.jump_on belongs to \"hybrid-kernel\" and \"guarded-kernel\", not \"gated-kernel\"",
+            Box::new(|m| m["graphs"]["refine"]["apply"]["jump_on"] = "replaced".into()),
+        ),
+        (
+            "unknown variant `smoothed`, expected `every-pixel` or `replaced`",
+            Box::new(|m| {
+                guarded(m);
+                m["graphs"]["refine"]["apply"]["jump_on"] = "smoothed".into();
+            }),
         ),
         (
             "apply.error_unit belongs to \"guarded-kernel\", not \"gated-kernel\"",

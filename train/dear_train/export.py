@@ -120,8 +120,15 @@ _GATED_DEFINITION = (
 )
 
 
-def refine_apply_spec(net: RefineNet) -> dict | None:
+#: ``apply.jump_on`` values: the jump term on every pixel (as the refiners are trained), or only
+#: on the pixels the classical filter replaced (``kpn.HybridKernelApply``'s ``replaced``).
+JUMP_ON = ("every-pixel", "replaced")
+
+
+def refine_apply_spec(net: RefineNet, jump_on: str = "every-pixel") -> dict | None:
     """``graphs.refine.apply``: what the daemon does with a format-2 refine graph's maps."""
+    if jump_on not in JUMP_ON:
+        raise ValueError(f"jump_on {jump_on!r}: one of {', '.join(JUMP_ON)}")
     upsample = (
         "maps upsampled bilinearly (half-pixel centres, edges clamped) to the depth grid and "
         "cropped; "
@@ -138,8 +145,10 @@ def refine_apply_spec(net: RefineNet) -> dict | None:
         definition = (
             upsample
             + "d = depth / max_depth_m, c = classical / max_depth_m (the classical refiner's "
-            "output on the warped depth); t = sigmoid(maps[12] + jump_scale * |c - d|); b = d "
-            "+ t * (c - d) where d > 0 and c > 0, d where only d > 0, c where only c > 0; "
+            "output on the warped depth); t = sigmoid(maps[12] + j * jump_scale * |c - d|), j = 1 "
+            "(jump_on = every-pixel) or, with jump_on = replaced, 1 where the classical "
+            "refiner's confidence is below 128 (it replaced the measurement) and 0 elsewhere; "
+            "b = d + t * (c - d) where d > 0 and c > 0, d where only d > 0, c where only c > 0; "
             + _GATED_DEFINITION
         )
         if net.variant == "guarded":
@@ -165,6 +174,7 @@ def refine_apply_spec(net: RefineNet) -> dict | None:
     }
     if net.variant in ("hybrid", "guarded"):
         spec["jump_scale"] = kpn.HYBRID_JUMP_SCALE
+        spec["jump_on"] = jump_on
     if net.variant == "guarded":
         spec["error_unit"] = kpn.GUARDED_ERROR_UNIT
         spec["log_error_bound"] = kpn.GUARDED_LOG_ERROR_BOUND
@@ -365,11 +375,13 @@ def export_bundle(
     check: bool = True,
     check_sizes: tuple[tuple[int, int], ...] = ((96, 128), (64, 80)),
     macs_at: tuple[int, int] | None = (480, 640),
+    jump_on: str = "every-pixel",
 ) -> dict:
     """Export ``model`` to the bundle directory ``out``; returns the manifest it wrote.
 
     ``check`` compares every graph with PyTorch at each of ``check_sizes`` (two sizes, so the
-    dynamic H/W axes are exercised); ``macs_at`` records each graph's MACs at that ``(H, W)``.
+    dynamic H/W axes are exercised); ``macs_at`` records each graph's MACs at that ``(H, W)``;
+    ``jump_on`` is a hybrid or guarded refiner's ``apply.jump_on`` (:data:`JUMP_ON`).
     """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -393,7 +405,7 @@ def export_bundle(
             out / specs[name]["file"],
             check_sizes if check else None,
             macs_at,
-            refine_apply_spec(model.refine) if name == "refine" else None,
+            refine_apply_spec(model.refine, jump_on) if name == "refine" else None,
         )
         for name, module in modules.items()
     }
@@ -435,6 +447,7 @@ def export_refine_into(
     check: bool = True,
     check_sizes: tuple[tuple[int, int], ...] = ((96, 128), (64, 80)),
     macs_at: tuple[int, int] | None = (480, 640),
+    jump_on: str = "every-pixel",
 ) -> dict:
     """Replace the refinement graph of the existing bundle ``bundle`` with ``model``'s.
 
@@ -470,7 +483,7 @@ def export_refine_into(
         bundle / spec["file"],
         check_sizes if check else None,
         macs_at,
-        refine_apply_spec(model.refine),
+        refine_apply_spec(model.refine, jump_on),
     )
     manifest["variant"] = profile.variant
     manifest["format_version"] = format_version(profile.variant)
@@ -563,13 +576,21 @@ def main(argv: list[str] | None = None) -> None:
         action="store_true",
         help="replace only refine.onnx of the existing bundle --out (a refine-only training run)",
     )
+    p.add_argument(
+        "--jump-on",
+        choices=JUMP_ON,
+        default="every-pixel",
+        help="hybrid and guarded refiners: the pixels the jump term applies to (apply.jump_on; "
+        "replaced: only those the classical filter replaced, docs/models.md)",
+    )
     a = p.parse_args(argv)
     model, profile = load_model(a.checkpoint)
     extra = recipe_record(load(a.checkpoint))
+    check = not a.no_check
     if a.refine_only:
-        manifest = export_refine_into(model, profile, a.out, extra, check=not a.no_check)
+        manifest = export_refine_into(model, profile, a.out, extra, check=check, jump_on=a.jump_on)
     else:
-        manifest = export_bundle(model, profile, a.out, extra, check=not a.no_check)
+        manifest = export_bundle(model, profile, a.out, extra, check=check, jump_on=a.jump_on)
     for _name, g in manifest["graphs"].items():
         chk = g.get("check", {}).get("max_abs_diff")
         print(

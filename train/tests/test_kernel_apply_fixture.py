@@ -1,4 +1,5 @@
-"""``fixtures/kernel_apply/{gated,hybrid}.json`` still are what the Python definitions compute.
+"""``fixtures/kernel_apply/{gated,hybrid,hybrid_replaced}.json`` still are what the Python
+definitions compute.
 
 The Rust tail of format-2 bundles is checked against that file
 (``pipeline/tests/kernel_apply_parity.rs``); this test fails when the PyTorch definition or the
@@ -82,3 +83,19 @@ def test_guarded_fixture_matches_the_python_definition(
         6.0,
     )
     assert apply["channels"] == 16 and apply["kind"] == "guarded-kernel"
+
+
+def test_hybrid_replaced_fixture_matches_the_python_definition(
+    fixture_maker: Callable[[Path], types.ModuleType],
+) -> None:
+    doc = json.loads((FIXTURE / "hybrid_replaced.json").read_text())
+    make = fixture_maker(FIXTURE / "make_gated.py")
+    c = make.hybrid_replaced_case()
+    for k in ("depth", "classical", "classical_confidence", "maps"):
+        np.testing.assert_array_equal(np.array(doc[k]["data"], np.float32), c[k].ravel())
+    want = np.array(doc["out"]["data"], np.float32).reshape(doc["out"]["shape"])
+    got = make.expected_hybrid(c["depth"], c["classical"], c["maps"], c["classical_confidence"])
+    np.testing.assert_allclose(got, want, atol=1e-6)
+    # The restriction matters in this case: the jump everywhere gives another output.
+    everywhere = make.expected_hybrid(c["depth"], c["classical"], c["maps"])
+    assert (np.abs(everywhere - want) > 0.1).sum() > 5

@@ -26,7 +26,9 @@ use crate::chain::output_guard::{OutputGuard, RefinementCheck};
 use crate::chain::preprocess::{normalize_amplitude_into, rgb_planes_into};
 use crate::filter::ClassicalRefiner;
 use crate::geometry::{warp_depth, warp_depth_and_bilinear};
-use crate::model::{BundleError, BundleRunner, ModelBundle, Normalisation, RunnerOptions};
+use crate::model::{
+    BundleError, BundleRunner, ClassicalEstimate, ModelBundle, Normalisation, RunnerOptions,
+};
 use crate::recalibration::direct::{estimate_calibration_direct_against, DirectFitParams};
 use crate::recalibration::residual::{EdgeAlignment, EdgeCheck};
 use crate::recalibration::{LsqError, Measurement, RobustOptions};
@@ -935,7 +937,13 @@ impl BackEnd<'_> {
                     amplitude_warped.view(),
                     depth_warped.view(),
                     rgb,
-                    staged.classical.as_ref().map(|(depth, _)| depth.view()),
+                    staged
+                        .classical
+                        .as_ref()
+                        .map(|(depth, confidence)| ClassicalEstimate {
+                            depth: depth.view(),
+                            confidence: confidence.view(),
+                        }),
                     refined.view_mut(),
                 )
             },

@@ -91,6 +91,10 @@ fn round_small(x: f32) -> u8 {
 /// time on simulated frames), so these rank with the filled pixels.
 pub const REPLACED_CONFIDENCE: u8 = 64;
 
+/// The lowest confidence of a pixel whose output derives from its own measurement (measured and
+/// at most smoothed); below it, the depth was taken from neighbours (filled, snapped, replaced).
+pub const MEASURED_CONFIDENCE: u8 = 128;
+
 /// Settings of the [`ClassicalRefiner`]. The defaults were chosen by measurement on simulated
 /// aligned frames (`dear eval --baselines`, RESULTS.md); spatial settings are in pixels.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -189,8 +193,9 @@ impl ClassicalRefiner {
     ///
     /// Writes the refined depth (`0` = invalid) and a confidence per pixel:
     /// - `255`: measured, and the output equals the measurement;
-    /// - `128..=254`: measured and smoothed; lower the larger the correction, reaching 128 at
-    ///   the same-surface tolerance ([`surface_tolerance`]) of the measurement;
+    /// - `128..=254` (from [`MEASURED_CONFIDENCE`]): measured and smoothed; lower the larger the
+    ///   correction, reaching 128 at the same-surface tolerance ([`surface_tolerance`]) of the
+    ///   measurement;
     /// - `1..=127`: not measured here: filled from neighbours (holes; higher the better the
     ///   colour and distance match of the best source), or a flying pixel moved onto a
     ///   neighbouring surface or an outlier replaced by its neighbours' median
@@ -335,6 +340,7 @@ fn output_row(
         };
         // Measured here (used where fc = 0): lower the larger the smoothing's correction.
         let change = (z - measured).abs() / surface_tolerance(measured);
+        // 255 − 127 = MEASURED_CONFIDENCE at the tolerance and beyond.
         let smoothed = 255 - round_small(127.0 * change.min(1.0));
         *o = if ok { z } else { 0.0 };
         *c = if !ok {
@@ -394,7 +400,10 @@ mod tests {
         let after = std_dev(inner(&out).map(|z| z - 2.0));
         assert!(before > 0.009, "input noise {before}");
         assert!(after < before / 4.0, "std {before} → {after}");
-        assert!(conf.iter().all(|&c| c >= 128), "every pixel is measured");
+        assert!(
+            conf.iter().all(|&c| c >= MEASURED_CONFIDENCE),
+            "every pixel is measured"
+        );
     }
 
     #[test]

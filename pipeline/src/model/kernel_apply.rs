@@ -17,8 +17,9 @@
 use ndarray::{Array2, ArrayView2, ArrayViewMut2, Axis, CowArray, Ix2};
 use rayon::prelude::*;
 
+use crate::filter::MEASURED_CONFIDENCE;
 use crate::geometry::surface::is_valid_depth_branchless;
-use crate::model::manifest::{ErrorFloor, RefineApply};
+use crate::model::manifest::{ErrorFloor, JumpOn, RefineApply};
 use crate::vector_math::{exp_fast, ln_fast};
 
 /// Head channels of the gated refiner: 9 kernel logits, bias, gate, log-sharpness.
@@ -50,6 +51,8 @@ pub struct GatedKernel {
     pub max_depth_m: f32,
     /// `Some` for a hybrid or guarded refiner ([`blend_classical`]): its `jump_scale`.
     pub jump_scale: Option<f32>,
+    /// Which pixels the jump term applies to ([`blend_classical`]).
+    pub jump_on: JumpOn,
     /// `Some` for a guarded refiner ([`select_guarded`]).
     pub errors: Option<ErrorMaps>,
 }
@@ -62,6 +65,7 @@ impl GatedKernel {
             range_scale: apply.range_scale,
             max_depth_m,
             jump_scale: apply.jump_scale,
+            jump_on: apply.jump_on.unwrap_or(JumpOn::EveryPixel),
             errors: apply
                 .error_unit
                 .zip(apply.log_error_bound)
@@ -191,9 +195,21 @@ pub fn apply_gated(
         );
 }
 
+/// The classical refiner's output on the warped depth, as the hybrid tail reads it
+/// (`ClassicalRefiner::refine_into`'s two planes).
+#[derive(Debug, Clone, Copy)]
+pub struct ClassicalEstimate<'a> {
+    /// Depth, metres (0 = invalid).
+    pub depth: ArrayView2<'a, f32>,
+    /// Its confidence; below [`MEASURED_CONFIDENCE`] the pixel was not measured itself.
+    pub confidence: ArrayView2<'a, u8>,
+}
+
 /// The hybrid refiner's first step (`HybridKernelApply` in kpn.py): per pixel, the measured
 /// `depth` and the `classical` refiner's output are blended with the trust
-/// `t = σ(m_12 + jump_scale · |c − d| / max_depth)` (map 12 upsampled like the others):
+/// `t = σ(m_12 + j · jump_scale · |c − d| / max_depth)` (map 12 upsampled like the others;
+/// `j` = 1, or with [`JumpOn::Replaced`] 1 only where the classical filter replaced the
+/// measurement, its confidence below [`MEASURED_CONFIDENCE`], and 0 elsewhere):
 ///
 /// ```text
 /// base = d + t · (c − d)   where both are valid
@@ -208,7 +224,7 @@ pub fn apply_gated(
 pub fn blend_classical(
     maps: &[Array2<f32>],
     depth: ArrayView2<f32>,
-    classical: ArrayView2<f32>,
+    classical: ClassicalEstimate,
     mut base: ArrayViewMut2<f32>,
     k: &GatedKernel,
 ) {
@@ -217,8 +233,14 @@ pub fn blend_classical(
         "hybrid maps: 13 planes (a guarded head's 14th–16th are read by select_guarded)"
     );
     let jump = k.jump_scale.expect("blend_classical needs a hybrid kernel") / k.max_depth_m;
+    let replaced_only = k.jump_on == JumpOn::Replaced;
     let (h, w) = depth.dim();
-    assert_eq!(classical.dim(), (h, w), "classical shape");
+    assert_eq!(classical.depth.dim(), (h, w), "classical shape");
+    assert_eq!(
+        classical.confidence.dim(),
+        (h, w),
+        "classical confidence shape"
+    );
     assert_eq!(base.dim(), (h, w), "base shape");
     let trust_map = maps[12].as_standard_layout();
     let trust_map = &trust_map;
@@ -232,15 +254,22 @@ pub fn blend_classical(
     base.axis_iter_mut(Axis(0))
         .into_par_iter()
         .zip(depth.axis_iter(Axis(0)))
-        .zip(classical.axis_iter(Axis(0)))
+        .zip(classical.depth.axis_iter(Axis(0)))
+        .zip(classical.confidence.axis_iter(Axis(0)))
         .enumerate()
         .for_each_init(
             || (vec![0.0f32; w4], vec![0.0f32; w]),
-            |(low, full), (y, ((mut out, d_row), c_row))| {
+            |(low, full), (y, (((mut out, d_row), c_row), conf_row))| {
                 let (y0, y1, fy) = ys[y];
                 lerp_rows(map_row(trust_map, y0), map_row(trust_map, y1), fy, low);
                 upsample_row(low, k.stride, full);
                 let (d_row, c_row) = (contiguous(&d_row), contiguous(&c_row));
+                let conf_row = contiguous(&conf_row);
+                let jump = RowJump {
+                    scale: jump,
+                    confidence: &conf_row,
+                    replaced_only,
+                };
                 match out.as_slice_mut() {
                     Some(out) => blend_row(out, &d_row, &c_row, full, jump),
                     None => {
@@ -508,19 +537,38 @@ fn lerp_rows(a: &[f32], b: &[f32], fy: f32, low: &mut [f32]) {
 }
 
 /// A row as a slice, borrowed when contiguous.
-fn contiguous<'a>(row: &'a ndarray::ArrayView1<'_, f32>) -> std::borrow::Cow<'a, [f32]> {
+fn contiguous<'a, T: Clone>(row: &'a ndarray::ArrayView1<'_, T>) -> std::borrow::Cow<'a, [T]> {
     match row.as_slice() {
         Some(s) => std::borrow::Cow::Borrowed(s),
         None => std::borrow::Cow::Owned(row.to_vec()),
     }
 }
 
+/// The jump term of one row of [`blend_classical`]: its scale (per metre), the classical
+/// filter's confidence row, and whether only the pixels it replaced take the term.
+#[derive(Clone, Copy)]
+struct RowJump<'a> {
+    scale: f32,
+    confidence: &'a [u8],
+    replaced_only: bool,
+}
+
 /// One row of [`blend_classical`], written with selects (every pixel computes the blend, the
 /// validity of `d` and `c` picks the result) so that it vectorises.
 #[multiversion::multiversion(targets("x86_64+avx512f+avx512bw+avx512vl+fma", "x86_64+avx2+fma"))]
-fn blend_row(out: &mut [f32], d_row: &[f32], c_row: &[f32], logits: &[f32], jump: f32) {
-    for (((o, &d), &c), &logit) in out.iter_mut().zip(d_row).zip(c_row).zip(logits) {
-        let t = sigmoid(logit + jump * (c - d).abs());
+fn blend_row(out: &mut [f32], d_row: &[f32], c_row: &[f32], logits: &[f32], jump: RowJump) {
+    let pixels = out
+        .iter_mut()
+        .zip(d_row.iter().zip(c_row))
+        .zip(logits.iter().zip(jump.confidence));
+    for ((o, (&d, &c)), (&logit, &confidence)) in pixels {
+        let measured = confidence >= MEASURED_CONFIDENCE;
+        let scale = if jump.replaced_only & measured {
+            0.0
+        } else {
+            jump.scale
+        };
+        let t = sigmoid(logit + scale * (c - d).abs());
         let b = d + t * (c - d);
         // A corrupt trust map falls back to the measurement.
         let b = if b.is_finite() { b } else { d };
@@ -658,7 +706,19 @@ mod tests {
             range_scale: 100.0,
             max_depth_m: 10.0,
             jump_scale: None,
+            jump_on: JumpOn::EveryPixel,
             errors: None,
+        }
+    }
+
+    /// The classical estimate `depth` with its `confidence`.
+    fn measured<'a>(
+        depth: ArrayView2<'a, f32>,
+        confidence: &'a Array2<u8>,
+    ) -> ClassicalEstimate<'a> {
+        ClassicalEstimate {
+            depth,
+            confidence: confidence.view(),
         }
     }
 
@@ -860,11 +920,12 @@ mod tests {
             _ => 2.001,
         });
         let mut base = Array2::zeros((8, 8));
+        let all_measured = Array2::from_elem((8, 8), 255u8);
         // Strongly distrusted: the measurement, except a far jump (1 m ≙ logit +30).
         blend_classical(
             &hybrid_maps(-20.0),
             depth.view(),
-            classical.view(),
+            measured(classical.view(), &all_measured),
             base.view_mut(),
             &hybrid(),
         );
@@ -876,7 +937,7 @@ mod tests {
         blend_classical(
             &hybrid_maps(0.0),
             depth.view(),
-            classical.view(),
+            measured(classical.view(), &all_measured),
             base.view_mut(),
             &hybrid(),
         );
@@ -887,7 +948,7 @@ mod tests {
         blend_classical(
             &hybrid_maps(0.0),
             holed.view(),
-            classical.view(),
+            measured(classical.view(), &all_measured),
             base.view_mut(),
             &hybrid(),
         );
@@ -901,7 +962,10 @@ mod tests {
         blend_classical(
             &hybrid_maps(0.0),
             holed_t.t(),
-            classical_t.t(),
+            ClassicalEstimate {
+                depth: classical_t.t(),
+                confidence: all_measured.t(),
+            },
             base_t.view_mut(),
             &hybrid(),
         );
@@ -909,6 +973,60 @@ mod tests {
             .iter()
             .zip(&base)
             .all(|(a, b)| a.to_bits() == b.to_bits()));
+    }
+
+    #[test]
+    fn with_jump_on_replaced_only_the_pixels_the_classical_filter_replaced_take_the_jump() {
+        // A 1 m move at (2, 2) and (5, 5), a 1 mm one everywhere else; the classical filter
+        // measured (2, 2) and smoothed it far (confidence 128) but replaced (5, 5) (64).
+        let depth = Array2::from_elem((8, 8), 2.0f32);
+        let classical = Array2::from_shape_fn((8, 8), |(y, x)| match (y, x) {
+            (2, 2) | (5, 5) => 3.0,
+            _ => 2.001,
+        });
+        let confidence = Array2::from_shape_fn((8, 8), |(y, x)| match (y, x) {
+            (2, 2) => MEASURED_CONFIDENCE,
+            (5, 5) => MEASURED_CONFIDENCE - 64,
+            _ => 250,
+        });
+        let estimate = measured(classical.view(), &confidence);
+        let mut every = Array2::zeros((8, 8));
+        let mut replaced = Array2::zeros((8, 8));
+        let maps = hybrid_maps(-20.0);
+        blend_classical(&maps, depth.view(), estimate, every.view_mut(), &hybrid());
+        let only_replaced = GatedKernel {
+            jump_on: JumpOn::Replaced,
+            ..hybrid()
+        };
+        blend_classical(
+            &maps,
+            depth.view(),
+            estimate,
+            replaced.view_mut(),
+            &only_replaced,
+        );
+        // Every pixel: both far moves win over the distrust (logit −20 + 30).
+        assert!((every[[2, 2]] - 3.0).abs() < 1e-3, "{}", every[[2, 2]]);
+        assert!((every[[5, 5]] - 3.0).abs() < 1e-3, "{}", every[[5, 5]]);
+        // Replaced only: the smoothed pixel keeps its measurement, the replaced one does not.
+        assert!(
+            (replaced[[2, 2]] - 2.0).abs() < 1e-6,
+            "{}",
+            replaced[[2, 2]]
+        );
+        assert!(
+            (replaced[[5, 5]] - 3.0).abs() < 1e-3,
+            "{}",
+            replaced[[5, 5]]
+        );
+        // Small moves are the trust map's alone either way: identical.
+        for (y, x) in [(0, 0), (3, 4), (7, 7)] {
+            assert_eq!(
+                every[[y, x]].to_bits(),
+                replaced[[y, x]].to_bits(),
+                "({y},{x})"
+            );
+        }
     }
 
     #[test]

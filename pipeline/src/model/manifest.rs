@@ -97,6 +97,10 @@ pub struct RefineApply {
     /// |classical − depth|.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub jump_scale: Option<f32>,
+    /// `hybrid-kernel` and `guarded-kernel`, optional: which pixels the jump term
+    /// (`jump_scale · |c − d|`) applies to ([`JumpOn`]; absent: every pixel, as trained).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub jump_on: Option<JumpOn>,
     /// `guarded-kernel` only: expected error (normalised depth) of an error-map logit of 0.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error_unit: Option<f32>,
@@ -108,6 +112,21 @@ pub struct RefineApply {
     /// ([`crate::model::kernel_apply::floor_expected_error`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error_floor: Option<ErrorFloor>,
+}
+
+/// `graphs.refine.apply.jump_on`: the pixels on which the classical estimate's trust rises with
+/// its distance from the measurement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum JumpOn {
+    /// Every pixel where both depths are valid (the definition the refiners were trained with).
+    EveryPixel,
+    /// Only the pixels the classical filter did not measure itself (its confidence below
+    /// [`crate::filter::MEASURED_CONFIDENCE`]: a flying pixel snapped onto a surface, an outlier
+    /// replaced by its neighbours' median). A large move by its smoothing (across a depth step
+    /// whose colours match) is then the network's call like a small one, so a measurement that
+    /// was right is not handed to a smoothed estimate that is not.
+    Replaced,
 }
 
 /// `graphs.refine.apply.error_floor`: the expected error a guarded refiner publishes is raised
@@ -475,6 +494,12 @@ fn check_apply(a: &RefineApply, multiple: usize) -> Result<(), String> {
             ))
         }
         _ => {}
+    }
+    if a.jump_on.is_some() && !kind.takes_classical() {
+        return Err(format!(
+            "apply.jump_on belongs to \"hybrid-kernel\" and \"guarded-kernel\", not {:?}",
+            a.kind
+        ));
     }
     let guarded = kind == ApplyKind::Guarded;
     for (name, v) in [

@@ -20,5 +20,6 @@ mod stacked_input;
 
 pub use bundle::{hex_sha256, ModelBundle};
 pub use error::BundleError;
+pub use kernel_apply::ClassicalEstimate;
 pub use manifest::{GraphRole, Manifest, Normalisation, RefineApply};
 pub use runner::{BundleRunner, RunnerOptions};

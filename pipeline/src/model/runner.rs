@@ -17,7 +17,8 @@ use tract_onnx::prelude::*;
 use crate::model::bundle::{LoadedGraph, ModelBundle};
 use crate::model::error::BundleError;
 use crate::model::kernel_apply::{
-    apply_gated, blend_classical, floor_expected_error, select_guarded, GatedKernel,
+    apply_gated, blend_classical, floor_expected_error, select_guarded, ClassicalEstimate,
+    GatedKernel,
 };
 use crate::model::manifest::{output_contract, GraphOutput, GraphRole};
 use crate::model::stacked_input::{
@@ -201,7 +202,7 @@ impl BundleRunner {
 
     /// Refined depth (metres) from the warped normalised amplitude, the warped depth (metres),
     /// for variants that use them the RGB planes, and for `hybrid` and `guarded` refiners the
-    /// classical refiner's output on the warped depth (metres). A guarded refiner publishes,
+    /// classical refiner's output on the warped depth (metres) with its confidence. A guarded refiner publishes,
     /// per pixel, the candidate with the smallest expected error and leaves that error in
     /// [`expected_log_error`](Self::expected_log_error).
     ///
@@ -213,7 +214,7 @@ impl BundleRunner {
         amplitude: ArrayView2<f32>,
         depth: ArrayView2<f32>,
         rgb: Option<[ArrayView2<f32>; 3]>,
-        classical: Option<ArrayView2<f32>>,
+        classical: Option<ClassicalEstimate>,
         mut out: ArrayViewMut2<f32>,
     ) -> Result<(), BundleError> {
         let missing = |what: &str| BundleError::Run {
@@ -231,7 +232,9 @@ impl BundleRunner {
         }
         let classical_plane;
         if self.blended.is_some() {
-            classical_plane = [classical.ok_or_else(|| missing("the classical refiner's output"))?];
+            classical_plane = [classical
+                .ok_or_else(|| missing("the classical refiner's output"))?
+                .depth];
             inputs.push(("classical", &classical_plane));
         }
         match &mut self.refine_tail {
@@ -245,9 +248,10 @@ impl BundleRunner {
                         blend_classical(maps, depth, c, base.view_mut(), kernel);
                         apply_gated(maps, base.view(), out.view_mut(), kernel);
                         if let Some(log_error) = &mut self.log_error {
-                            select_guarded(maps, depth, c, out, log_error.view_mut(), kernel);
+                            let cd = c.depth;
+                            select_guarded(maps, depth, cd, out, log_error.view_mut(), kernel);
                             if let Some(floor) = kernel.errors.and_then(|e| e.floor) {
-                                floor_expected_error(depth, c, log_error.view_mut(), &floor);
+                                floor_expected_error(depth, cd, log_error.view_mut(), &floor);
                             }
                         }
                     }

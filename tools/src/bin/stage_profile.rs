@@ -35,7 +35,7 @@ use dear_pipeline::chain::confidence::confidence_into;
 use dear_pipeline::chain::preprocess::{normalize_amplitude_into, rgb_planes_into};
 use dear_pipeline::filter::ClassicalRefiner;
 use dear_pipeline::geometry::{warp_depth, warp_depth_and_bilinear};
-use dear_pipeline::model::{BundleRunner, ModelBundle, RunnerOptions};
+use dear_pipeline::model::{BundleRunner, ClassicalEstimate, ModelBundle, RunnerOptions};
 use dear_pipeline::recalibration::direct::{estimate_calibration_direct, DirectFitParams};
 use dear_pipeline::recalibration::residual::EdgeCheck;
 use dear_pipeline::recalibration::Measurement;
@@ -206,8 +206,12 @@ fn main() -> anyhow::Result<()> {
                 let rgb = runner
                     .refine_uses_rgb()
                     .then(|| [r.view(), g.view(), b.view()]);
+                let classical = ClassicalEstimate {
+                    depth: cd.view(),
+                    confidence: cc.view(),
+                };
                 runner
-                    .refine(aw.view(), dw.view(), rgb, Some(cd.view()), out.view_mut())
+                    .refine(aw.view(), dw.view(), rgb, Some(classical), out.view_mut())
                     .with_context(|| format!("the refine graph of {bundle_name} failed"))?;
                 lap(4, &mut t);
                 out.view()

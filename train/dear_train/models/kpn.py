@@ -204,6 +204,11 @@ class HybridKernelApply(nn.Module):
 
     so the output lies between the measurement and the classical estimate plus the gated
     kernel's bounded, edge-cut correction.
+
+    ``replaced`` (optional, bool like ``depth``) restricts the jump term to the pixels the
+    classical filter did not measure itself (its confidence below 128: a flying pixel snapped,
+    an outlier replaced): the bundle's ``apply.jump_on = "replaced"``. Without it the term
+    applies everywhere, as the refiners were trained.
     """
 
     def __init__(self) -> None:
@@ -211,11 +216,18 @@ class HybridKernelApply(nn.Module):
         self.gated = GatedKernelApply()
 
     def forward(
-        self, depth: torch.Tensor, classical: torch.Tensor, maps: torch.Tensor
+        self,
+        depth: torch.Tensor,
+        classical: torch.Tensor,
+        maps: torch.Tensor,
+        replaced: torch.Tensor | None = None,
     ) -> torch.Tensor:
         d_ok = depth > 0
         c_ok = classical > 0
-        trust = torch.sigmoid(maps[:, 12:13] + HYBRID_JUMP_SCALE * (classical - depth).abs())
+        jump = HYBRID_JUMP_SCALE * (classical - depth).abs()
+        if replaced is not None:
+            jump = jump * replaced.to(jump.dtype)
+        trust = torch.sigmoid(maps[:, 12:13] + jump)
         blended = depth + trust * (classical - depth)
         base = torch.where(d_ok & c_ok, blended, torch.where(d_ok, depth, classical))
         return self.gated(base, maps[:, :12])
