@@ -48,8 +48,11 @@ fn input_and_refined(
 
 #[test]
 fn clean_single_bounce_depth_comes_out_no_worse_than_it_went_in() {
-    // 320×240 and a smaller module's 240×180 (the gate sees every stream on the same grid).
-    for size in [(320, 240), (240, 180)] {
+    // 320×240 and a smaller module's 240×180 (the gate sees every stream on the same grid),
+    // each with the low-error quarter's allowance over the input's (cm): issue 33's clean-family
+    // bound at the size the families are rendered at (+0.05 measured; +0.12 with the jump term
+    // on every pixel), its every-family bound at 240×180 (+0.12 measured; +0.16).
+    for (size, allowance) in [((320, 240), 0.1), ((240, 180), 0.3)] {
         let [input, refined] = input_and_refined(Family::Clean, 4343, 3, size);
         println!(
             "clean frames at {size:?}, MAE all (low quarter) cm: input {:.2} ({:.2}), edge {:.2} ({:.2})",
@@ -59,10 +62,10 @@ fn clean_single_bounce_depth_comes_out_no_worse_than_it_went_in() {
             refined.0 <= input.0,
             "{size:?}: MAE {refined:?} vs input {input:?}"
         );
-        // Issue 33's bound for every family. Where the classical filter finds a jump it still
-        // wins, which costs a little; before the gate these frames lost 2.66 cm (320×240).
+        // Where the classical filter replaced a pixel its estimate still wins, which costs a
+        // little; before the gate these frames lost 2.66 cm (320×240).
         assert!(
-            refined.1 <= input.1 + 0.3,
+            refined.1 <= input.1 + allowance,
             "{size:?}: low-error quarter {refined:?} vs input {input:?}"
         );
     }
