@@ -187,7 +187,9 @@ HYBRID_TRUST_INIT = 2.0
 #: Logit added per unit of normalised |classical − measurement| (× max_depth 10 m: +1 per
 #: 3.3 cm): where the classical filter moved a pixel far (a flying pixel snapped onto a surface,
 #: an outlier replaced), its estimate is trusted unless the network insists; small moves (noise
-#: smoothing) are the network's call.
+#: smoothing) are the network's call. Trained on every pixel; a bundle with ``apply.jump_on =
+#: "replaced"`` applies it only where the classical filter replaced the measurement, so a far
+#: smoothing move (across a depth step whose colours match) is the network's call as well.
 HYBRID_JUMP_SCALE = 300.0
 
 
