@@ -61,6 +61,15 @@ fn hybrid_tail(
     out
 }
 
+/// The largest |a − b| over two planes of one shape.
+fn max_abs_diff(a: &Array2<f32>, b: &Array2<f32>) -> f32 {
+    assert_eq!(a.dim(), b.dim());
+    a.iter()
+        .zip(b.iter())
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max)
+}
+
 fn fixture(name: &str) -> serde_json::Value {
     common::load_fixture(&format!("kernel_apply/{name}"))
 }
@@ -105,11 +114,7 @@ fn hybrid_tail_matches_pytorch() {
     let want = plane(&doc["out"]);
     let kernel = kernel(&doc, Some(300.0), None);
     let out = hybrid_tail(&maps, &depth, &classical, None, &kernel);
-    let worst = out
-        .iter()
-        .zip(want.iter())
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
+    let worst = max_abs_diff(&out, &want);
     println!("hybrid tail vs PyTorch: max |Δ| = {worst:.2e} m");
     assert!(worst < 1e-5, "max |Rust − PyTorch| = {worst} m");
     // The case exercises both sources: some outputs follow the classical estimate far from
@@ -143,11 +148,7 @@ fn hybrid_tail_with_the_jump_on_replaced_pixels_matches_pytorch() {
         ..kernel(&doc, Some(300.0), None)
     };
     let out = hybrid_tail(&maps, &depth, &classical, Some(&confidence), &kernel);
-    let worst = out
-        .iter()
-        .zip(want.iter())
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f32, f32::max);
+    let worst = max_abs_diff(&out, &want);
     println!("hybrid tail, jump on replaced pixels, vs PyTorch: max |Δ| = {worst:.2e} m");
     assert!(worst < 1e-5, "max |Rust − PyTorch| = {worst} m");
     // The case exercises the restriction: with the jump everywhere, some far moves the filter
