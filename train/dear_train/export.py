@@ -123,9 +123,11 @@ _GATED_DEFINITION = (
 #: ``apply.jump_on`` values: the jump term on every pixel (as the refiners are trained), or only
 #: on the pixels the classical filter replaced (``kpn.HybridKernelApply``'s ``replaced``).
 JUMP_ON = ("every-pixel", "replaced")
+#: The default: how the refiners are trained.
+JUMP_ON_DEFAULT = JUMP_ON[0]
 
 
-def refine_apply_spec(net: RefineNet, jump_on: str = "every-pixel") -> dict | None:
+def refine_apply_spec(net: RefineNet, jump_on: str = JUMP_ON_DEFAULT) -> dict | None:
     """``graphs.refine.apply``: what the daemon does with a format-2 refine graph's maps."""
     if jump_on not in JUMP_ON:
         raise ValueError(f"jump_on {jump_on!r}: one of {', '.join(JUMP_ON)}")
@@ -375,7 +377,7 @@ def export_bundle(
     check: bool = True,
     check_sizes: tuple[tuple[int, int], ...] = ((96, 128), (64, 80)),
     macs_at: tuple[int, int] | None = (480, 640),
-    jump_on: str = "every-pixel",
+    jump_on: str = JUMP_ON_DEFAULT,
 ) -> dict:
     """Export ``model`` to the bundle directory ``out``; returns the manifest it wrote.
 
@@ -447,7 +449,7 @@ def export_refine_into(
     check: bool = True,
     check_sizes: tuple[tuple[int, int], ...] = ((96, 128), (64, 80)),
     macs_at: tuple[int, int] | None = (480, 640),
-    jump_on: str = "every-pixel",
+    jump_on: str = JUMP_ON_DEFAULT,
 ) -> dict:
     """Replace the refinement graph of the existing bundle ``bundle`` with ``model``'s.
 
@@ -579,7 +581,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument(
         "--jump-on",
         choices=JUMP_ON,
-        default="every-pixel",
+        default=JUMP_ON_DEFAULT,
         help="hybrid and guarded refiners: the pixels the jump term applies to (apply.jump_on; "
         "replaced: only those the classical filter replaced, docs/models.md)",
     )

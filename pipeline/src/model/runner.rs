@@ -202,9 +202,9 @@ impl BundleRunner {
 
     /// Refined depth (metres) from the warped normalised amplitude, the warped depth (metres),
     /// for variants that use them the RGB planes, and for `hybrid` and `guarded` refiners the
-    /// classical refiner's output on the warped depth (metres) with its confidence. A guarded refiner publishes,
-    /// per pixel, the candidate with the smallest expected error and leaves that error in
-    /// [`expected_log_error`](Self::expected_log_error).
+    /// classical refiner's output on the warped depth (metres) with its confidence. A guarded
+    /// refiner publishes, per pixel, the candidate with the smallest expected error and leaves
+    /// that error in [`expected_log_error`](Self::expected_log_error).
     ///
     /// # Errors
     /// As [`flow`](Self::flow); [`BundleError::Run`] also when the graph needs RGB or the
