@@ -521,13 +521,13 @@ mod tests {
 
         pub fn flying(d: &Array2<f32>, rel: f32, abs_m: f32) -> Array2<f32> {
             let (h, w) = d.dim();
-            let mixed = |z: f32, tol: f32, a: f32, b: f32| {
-                let (da, db) = (z - a, b - z);
-                da.abs() > tol
-                    && db.abs() > tol
-                    && da * db > 0.0
-                    && is_valid_depth(a)
-                    && is_valid_depth(b)
+            // A sample off the image is invalid (0).
+            let at = |y: isize, x: isize| {
+                if y < 0 || x < 0 || y >= h as isize || x >= w as isize {
+                    0.0
+                } else {
+                    d[(y as usize, x as usize)]
+                }
             };
             Array2::from_shape_fn((h, w), |(y, x)| {
                 let z = d[(y, x)];
@@ -535,14 +535,21 @@ mod tests {
                     return 0.0;
                 }
                 let tol = (rel * z).max(abs_m);
-                let has_lr = x > 0 && x + 1 < w;
-                let has_ud = y > 0 && y + 1 < h;
-                let flying = (has_lr && mixed(z, tol, d[(y, x - 1)], d[(y, x + 1)]))
-                    || (has_ud && mixed(z, tol, d[(y - 1, x)], d[(y + 1, x)]))
-                    || (has_lr
-                        && has_ud
-                        && (mixed(z, tol, d[(y - 1, x - 1)], d[(y + 1, x + 1)])
-                            || mixed(z, tol, d[(y - 1, x + 1)], d[(y + 1, x - 1)])));
+                let (y, x) = (y as isize, x as isize);
+                let flying = [(0, 1), (1, 0), (1, 1), (1, -1)].iter().any(|&(dy, dx)| {
+                    let (a, b) = (at(y - dy, x - dx), at(y + dy, x + dx));
+                    let (a2, b2) = (at(y - 2 * dy, x - 2 * dx), at(y + 2 * dy, x + 2 * dx));
+                    let (da, db) = (z - a, b - z);
+                    let between = is_valid_depth(a)
+                        && is_valid_depth(b)
+                        && da.abs() > tol
+                        && db.abs() > tol
+                        && da * db > 0.0;
+                    let step = !is_valid_depth(a2)
+                        || !is_valid_depth(b2)
+                        || ((a + a2) - (b + b2)).abs() > 4.0 * tol;
+                    between && step
+                });
                 if flying {
                     0.0
                 } else {
