@@ -53,14 +53,14 @@ pub fn remove_flying_pixels(depth: ArrayView2<f32>, rel: f32, abs_m: f32, out: A
                     d[yy as usize * w + xx as usize]
                 }
             };
-            let flying = DIRECTIONS.iter().fold(false, |f, &(dy, dx)| {
+            let flying = DIRECTIONS.iter().any(|&(dy, dx)| {
                 let line = [
                     at(-2 * dy, -2 * dx),
                     at(-dy, -dx),
                     at(dy, dx),
                     at(2 * dy, 2 * dx),
                 ];
-                f | mixed_on_step(z, (rel * z).max(abs_m), line)
+                mixed_on_step(z, (rel * z).max(abs_m), line)
             });
             if is_valid_depth(z) && !flying {
                 z
