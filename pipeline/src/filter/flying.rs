@@ -53,15 +53,9 @@ pub fn remove_flying_pixels(depth: ArrayView2<f32>, rel: f32, abs_m: f32, out: A
                     d[yy as usize * w + xx as usize]
                 }
             };
-            let flying = DIRECTIONS.iter().any(|&(dy, dx)| {
-                let line = [
-                    at(-2 * dy, -2 * dx),
-                    at(-dy, -dx),
-                    at(dy, dx),
-                    at(2 * dy, 2 * dx),
-                ];
-                mixed_on_step(z, (rel * z).max(abs_m), line)
-            });
+            let flying = DIRECTIONS
+                .iter()
+                .any(|&dir| mixed_on_step(z, (rel * z).max(abs_m), line(dir, at)));
             if is_valid_depth(z) && !flying {
                 z
             } else {
@@ -96,6 +90,18 @@ fn mixed(z: f32, tol: f32, a: f32, b: f32) -> bool {
         & is_valid_depth_branchless(b)
 }
 
+/// The samples `[a₂, a, b, b₂]` of the line through a pixel in direction `(dy, dx)`, in the
+/// order [`mixed_on_step`] takes them; `at(dy, dx)` gives the sample at that offset.
+#[inline(always)]
+fn line<T>((dy, dx): (isize, isize), at: impl Fn(isize, isize) -> T) -> [T; 4] {
+    [
+        at(-2 * dy, -2 * dx),
+        at(-dy, -dx),
+        at(dy, dx),
+        at(2 * dy, 2 * dx),
+    ]
+}
+
 /// [`mixed`] along the line `[a₂, a, b, b₂]` through `z` (`a`, `b` its neighbours), and, where
 /// the outer samples are valid, a step between the sides' means of more than `2 · tol`.
 #[inline(always)]
@@ -117,14 +123,7 @@ fn interior_row(rows: [&[f32]; 5], (rel, abs_m): (f32, f32), out: &mut [f32]) {
         &rows[(2 + dy) as usize][start..start + n]
     };
     let z = at(0, 0);
-    let lines = DIRECTIONS.map(|(dy, dx)| {
-        [
-            at(-2 * dy, -2 * dx),
-            at(-dy, -dx),
-            at(dy, dx),
-            at(2 * dy, 2 * dx),
-        ]
-    });
+    let lines = DIRECTIONS.map(|dir| line(dir, at));
     for i in 0..n {
         let zi = z[i];
         let tol = (rel * zi).max(abs_m);
