@@ -6,8 +6,8 @@
 //! 2. [`snap`]: each is moved onto the neighbouring surface nearest to its measured depth (a
 //!    mixed pixel is dominated by the surface it mostly sees; choosing the side by colour, as
 //!    [`fill`] does, was measured to be worse, most of all at close range);
-//! 3. [`outlier`]: an isolated pixel off the surface of its valid 3 × 3 neighbourhood's median
-//!    is replaced by that median (heavy-tailed low-signal noise, which smoothing would spread);
+//! 3. [`outlier`]: a pixel off the surface of its valid 3 × 3 neighbourhood's median is
+//!    replaced by that median (heavy-tailed low-signal noise, which smoothing would spread);
 //! 4. [`fill`]: holes are filled from nearby measured pixels of similar colour, never across a
 //!    depth edge, up to a maximum radius;
 //! 5. [`domain_transform`]: a domain-transform filter guided by the RGB image smooths the depth

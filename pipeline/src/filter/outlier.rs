@@ -5,6 +5,11 @@
 //! over its neighbourhood instead of removing it; a median ignores it. Only pixels far from
 //! the median of their valid 3 × 3 neighbourhood (more than the same-surface tolerance) are
 //! replaced, so fine structure within the noise level is left to the edge-aware smoother.
+//!
+//! The rule does not also ask the pixel to be isolated (few neighbours on its own surface),
+//! although that would spare a correct pixel at the corner of a step: in heavy-tailed noise a
+//! pixel's neighbours scatter as much as it does, and every such condition tried made the
+//! held-out tuning set worse (models/edge/README.md, issue 33).
 
 use ndarray::{ArrayView2, ArrayViewMut2};
 
