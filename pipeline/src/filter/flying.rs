@@ -53,9 +53,10 @@ pub fn remove_flying_pixels(depth: ArrayView2<f32>, rel: f32, abs_m: f32, out: A
                     d[yy as usize * w + xx as usize]
                 }
             };
+            let tol = (rel * z).max(abs_m);
             let flying = DIRECTIONS
                 .iter()
-                .any(|&dir| mixed_on_step(z, (rel * z).max(abs_m), line(dir, at)));
+                .any(|&dir| mixed_on_step(z, tol, line(dir, at)));
             if is_valid_depth(z) && !flying {
                 z
             } else {

@@ -1,4 +1,4 @@
-//! Rejection of isolated depth outliers by the median of their neighbours.
+//! Rejection of depth outliers by the median of their neighbours.
 //!
 //! At low signal (few electrons, strong ambient light) ToF noise has heavy tails: single
 //! pixels land tens of centimetres off their surface. A linear smoother spreads such a pixel
