@@ -60,6 +60,9 @@ if cargo tree -p deard -e normal --prefix none | grep -E '^dear-eval '; then
     echo "deard's build includes dear-eval, the evaluation; it must not" >&2
     exit 1
 fi
+# The SDK's separate builds (the C library, the Python wheels) share the workspace's compiled
+# dependencies (feature-pins/): a crate they would build with other features is named here.
+python3 scripts/feature_pins.py
 # The instruction sets a board or an older PC runs (issue 36): dear-pipeline's unit tests under
 # qemu-x86_64 emulating an AVX2 CPU and one without AVX, so the versions this AVX-512 machine
 # never dispatches to are tested too (about 25 s).
@@ -75,8 +78,11 @@ if [ -d train ]; then
     # The ROS 2 bridge (issue 35) against an independent DDS: Cyclone DDS's Python package
     # subscribes to dear-ros2's topics with the ROS 2 type names, and the depth it receives
     # equals `dear dump`'s; CameraInfo and PointCloud2 checked too (loopback unicast; ~5 s).
+    # Built with the feature set of `cargo test --workspace` above (every package selected,
+    # dev-dependencies too: --tests), so only the binary itself is compiled; `-p dear-ros2`
+    # alone resolved smaller feature sets and compiled 29 dependencies again (5 minutes of CI).
     tier "ROS 2 bridge (tests/scripts/ros2_bridge.py)"
-    cargo build --quiet -p dear-ros2 --bin dear-ros2
+    cargo build --quiet --workspace --tests --bin dear-ros2
     .venv/bin/python tests/scripts/ros2_bridge.py
     # The Python client package against a real target/debug/deard (built by cargo test above).
     tier "pytest (client-py)"; (cd client-py && ../.venv/bin/python -m pytest -q tests)
