@@ -55,9 +55,9 @@ def tree(packages: list[str], edges: str) -> Features:
 def contexts(packages: list[str], dev: bool) -> tuple[Features, Features]:
     """(target, host) feature sets: `no-proc-macro` over normal edges leaves only crates built
     for the target; what the full tree adds beyond them is built for the host."""
-    kinds = "normal,build,dev" if dev else "normal,build"
-    target = tree(packages, ("normal,dev" if dev else "normal") + ",no-proc-macro")
-    full = tree(packages, kinds)
+    dev_edges = ",dev" if dev else ""
+    target = tree(packages, f"normal{dev_edges},no-proc-macro")
+    full = tree(packages, f"normal,build{dev_edges}")
     host = {name: sets - target.get(name, set()) for name, sets in full.items()}
     return target, {name: sets for name, sets in host.items() if sets}
 
